@@ -1,0 +1,105 @@
+//! Workloads shared by the criterion benches and the latency report.
+
+use concord_core::scene::{paper, AgentState, BuiltIn, Morphology, Scene, Vec2, MAX_AGENTS};
+use concord_core::{Decision, DecisionCore, Params};
+
+/// A vehicle at `pos` moving at `speed` along `heading`.
+pub fn vehicle(id: u32, pos: Vec2, heading: f64, speed: f64) -> AgentState {
+    AgentState {
+        id,
+        pos,
+        vel: Vec2::from_angle(heading).scale(speed),
+        heading,
+        ..AgentState::default()
+    }
+}
+
+/// A core on the paper's intersection with `samples` Monte Carlo samples.
+pub fn core(samples: usize) -> DecisionCore {
+    let mut params = Params::default();
+    params.trajectory.samples = samples;
+    DecisionCore::new(params, Morphology::built_in(BuiltIn::PaperIntersection))
+        .expect("valid parameters")
+}
+
+/// Lanes of the approaches other than the ego's.
+const OTHER_LANES: [u8; 5] = [
+    paper::HDV_STRAIGHT,
+    paper::EAST_LEFT,
+    paper::NORTH_STRAIGHT,
+    paper::SOUTH_STRAIGHT,
+    paper::EAST_RIGHT,
+];
+
+/// Dense closed-loop traffic on the paper's intersection: the ego drives its own decisions
+/// through the left turn (and starts over once through), while the HDV and up to 31 more
+/// road users flow at constant speeds along the lanes of the other approaches, re-entering at
+/// their lane's start. They do not react, so the ego must find its gaps.
+pub struct Traffic {
+    pub scene: Scene,
+    lanes: [u8; MAX_AGENTS],
+    s: [f64; MAX_AGENTS],
+    steps: u64,
+}
+
+impl Traffic {
+    /// `n_agents` road users besides the ego (the first is the paper's HDV).
+    pub fn new(core: &DecisionCore, n_agents: usize) -> Self {
+        let mut t = Traffic {
+            scene: Scene::new(0.0, Self::ego_at_start(), paper::CAV_LEFT),
+            lanes: [0; MAX_AGENTS],
+            s: [0.0; MAX_AGENTS],
+            steps: 0,
+        };
+        for i in 0..n_agents.min(MAX_AGENTS) {
+            let (lane, s, speed) = if i == 0 {
+                (paper::HDV_STRAIGHT, 0.0, 8.0)
+            } else {
+                (
+                    OTHER_LANES[i % OTHER_LANES.len()],
+                    11.0 * i as f64 % 70.0,
+                    3.0 + (i % 5) as f64,
+                )
+            };
+            t.lanes[i] = lane;
+            t.s[i] = s;
+            let (pos, tangent, _) = core.morphology().lane(lane).to_cartesian(s, 0.0, 0);
+            t.scene.push(vehicle(i as u32 + 1, pos, tangent, speed));
+        }
+        t
+    }
+
+    fn ego_at_start() -> AgentState {
+        vehicle(0, Vec2::new(40.0, 5.0), core::f64::consts::PI, 8.0)
+    }
+
+    /// Moves everything `dt` s on: the ego along `decision`'s trajectory, the others along
+    /// their lanes.
+    pub fn advance(&mut self, core: &DecisionCore, decision: &Decision, dt: f64) {
+        self.steps += 1;
+        self.scene.time_s = self.steps as f64 * dt;
+        let next = decision
+            .trajectory
+            .sample(dt)
+            .expect("every decision has a trajectory");
+        let dir = Vec2::from_angle(next.heading);
+        let ego = &mut self.scene.ego;
+        ego.acc = dir.scale((next.speed - ego.speed()) / dt);
+        ego.pos = Vec2::new(next.x, next.y);
+        ego.vel = dir.scale(next.speed);
+        ego.heading = next.heading;
+        if ego.pos.y < -30.0 {
+            *ego = Self::ego_at_start();
+        }
+        for i in 0..self.scene.n_agents {
+            let lane = core.morphology().lane(self.lanes[i]);
+            let a = &mut self.scene.agents[i];
+            self.s[i] += a.speed() * dt;
+            if self.s[i] > lane.length() {
+                self.s[i] = 0.0;
+            }
+            let (pos, tangent, _) = lane.to_cartesian(self.s[i], 0.0, 0);
+            *a = vehicle(a.id, pos, tangent, a.speed());
+        }
+    }
+}

@@ -1,0 +1,155 @@
+//! The gate on the LLM's recommendation A_final (eq. 16). Advice replaces the logit choice only
+//! when it answers a request issued in the last N cycles, its confidence is ≥ 0.7, it arrived
+//! before that request's deadline, and the maneuver passes the core's own navigation and
+//! safety checks. Otherwise the logit choice stands and the reason is recorded.
+
+use crate::choice::Maneuver;
+use crate::params::AdviceParams;
+use crate::scene::Turn;
+
+/// Capacity of the request log; `freshness_cycles` may not exceed it.
+pub const MAX_PENDING: usize = 256;
+
+/// Advice as received from the sidecar, stamped with its arrival time by the host.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Advice {
+    /// The request it answers (the cycle number that issued it).
+    pub request_id: u64,
+    /// A_final.
+    pub maneuver: Maneuver,
+    /// Confidence in [0, 1].
+    pub confidence: f64,
+    /// Arrival time on the core's clock, s.
+    pub received_at_s: f64,
+}
+
+/// What the gate made of the advice this cycle.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[repr(u8)]
+pub enum AdviceVerdict {
+    /// No advice was offered.
+    #[default]
+    NoAdvice = 0,
+    /// Applied: the decision follows A_final.
+    Accepted = 1,
+    /// Confidence or arrival time is not a finite number.
+    Malformed = 2,
+    /// Answers no request of the last N cycles (stale, or never issued).
+    UnknownRequest = 3,
+    /// Confidence below the threshold.
+    LowConfidence = 4,
+    /// Arrived after the request's deadline.
+    Late = 5,
+    /// A turn against the navigation instruction.
+    NavigationInconsistent = 6,
+    /// No feasible collision-free trajectory realises it.
+    Unsafe = 7,
+}
+
+impl AdviceVerdict {
+    /// Every verdict, by wire code.
+    pub const ALL: [AdviceVerdict; 8] = [
+        AdviceVerdict::NoAdvice,
+        AdviceVerdict::Accepted,
+        AdviceVerdict::Malformed,
+        AdviceVerdict::UnknownRequest,
+        AdviceVerdict::LowConfidence,
+        AdviceVerdict::Late,
+        AdviceVerdict::NavigationInconsistent,
+        AdviceVerdict::Unsafe,
+    ];
+    /// snake_case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            AdviceVerdict::NoAdvice => "no_advice",
+            AdviceVerdict::Accepted => "accepted",
+            AdviceVerdict::Malformed => "malformed",
+            AdviceVerdict::UnknownRequest => "unknown_request",
+            AdviceVerdict::LowConfidence => "low_confidence",
+            AdviceVerdict::Late => "late",
+            AdviceVerdict::NavigationInconsistent => "navigation_inconsistent",
+            AdviceVerdict::Unsafe => "unsafe",
+        }
+    }
+}
+
+/// Issue times of the last [`MAX_PENDING`] requests; request id = cycle number (from 1).
+#[derive(Clone, Copy, Debug)]
+pub struct RequestLog {
+    issued_at_s: [f64; MAX_PENDING],
+    /// Id of the newest request, 0 before the first.
+    pub latest: u64,
+}
+
+impl Default for RequestLog {
+    fn default() -> Self {
+        RequestLog {
+            issued_at_s: [f64::NAN; MAX_PENDING],
+            latest: 0,
+        }
+    }
+}
+
+impl RequestLog {
+    /// Issues the request of `cycle` at time `now`.
+    pub fn issue(&mut self, cycle: u64, now: f64) {
+        self.issued_at_s[(cycle % MAX_PENDING as u64) as usize] = now;
+        self.latest = cycle;
+    }
+    /// Issue time of request `id` if it is among the last `window` requests.
+    pub fn issued_at(&self, id: u64, window: u32) -> Option<f64> {
+        if id == 0 || id > self.latest || self.latest - id >= window.min(MAX_PENDING as u32) as u64
+        {
+            return None;
+        }
+        Some(self.issued_at_s[(id % MAX_PENDING as u64) as usize])
+    }
+    /// Deadline of request `id`, if fresh: issue time + `deadline_s`.
+    pub fn deadline(&self, id: u64, p: &AdviceParams) -> Option<f64> {
+        self.issued_at(id, p.freshness_cycles)
+            .map(|t| t + p.deadline_s)
+    }
+}
+
+/// Checks of eq. 16 that need no trajectory, in order; `Ok` means only the safety check remains.
+pub fn pre_check(
+    advice: &Advice,
+    log: &RequestLog,
+    route: Turn,
+    p: &AdviceParams,
+) -> Result<Maneuver, AdviceVerdict> {
+    if !advice.confidence.is_finite() || !advice.received_at_s.is_finite() {
+        return Err(AdviceVerdict::Malformed);
+    }
+    let deadline = log
+        .deadline(advice.request_id, p)
+        .ok_or(AdviceVerdict::UnknownRequest)?;
+    if advice.confidence < p.confidence_min {
+        return Err(AdviceVerdict::LowConfidence);
+    }
+    if advice.received_at_s > deadline {
+        return Err(AdviceVerdict::Late);
+    }
+    if !advice.maneuver.consistent_with(route) {
+        return Err(AdviceVerdict::NavigationInconsistent);
+    }
+    Ok(advice.maneuver)
+}
+
+/// The whole gate: [`pre_check`], then `is_safe` (the core's feasibility and collision check).
+pub fn gate(
+    advice: Option<&Advice>,
+    log: &RequestLog,
+    route: Turn,
+    p: &AdviceParams,
+    is_safe: impl FnOnce(Maneuver) -> bool,
+) -> (Option<Maneuver>, AdviceVerdict) {
+    let Some(advice) = advice else {
+        return (None, AdviceVerdict::NoAdvice);
+    };
+    match pre_check(advice, log, route, p) {
+        Err(v) => (None, v),
+        Ok(m) if is_safe(m) => (Some(m), AdviceVerdict::Accepted),
+        Ok(_) => (None, AdviceVerdict::Unsafe),
+    }
+}

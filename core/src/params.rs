@@ -1,0 +1,351 @@
+//! Every threshold and weight of the core, with units and defaults. Callers load it from TOML
+//! (`#[serde(default, deny_unknown_fields)]`: a missing key takes its default, an unknown key is
+//! an error); the core itself does no I/O.
+
+use crate::saliency::{FEATURES, FITTED_KEY};
+use crate::scene::InputLimits;
+use crate::trajectory::{MAX_SAMPLES, MAX_STEPS};
+
+/// All parameters of the decision core.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    pub limits: InputLimits,
+    pub opm: OpmParams,
+    pub saliency: SaliencyParams,
+    pub choice: ChoiceParams,
+    pub advice: AdviceParams,
+    pub trajectory: TrajectoryParams,
+}
+
+/// Object selection and conflict assessment (eq. 4–6).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OpmParams {
+    /// ΔT_th: a conflict with |ΔTTC| below this is risky and selects the agent, s.
+    pub delta_ttc_threshold_s: f64,
+    /// d_th: agents closer than this along the ego's lane centre line are selected, m.
+    pub proximity_threshold_m: f64,
+    /// Speed floor in TTC = d / max(v, floor) (guard of eq. 4 near standstill), m/s.
+    pub ttc_speed_floor_mps: f64,
+    /// TTC cap; a TTC at the cap means "not arriving", s.
+    pub ttc_max_s: f64,
+    /// Half-length of the conflict zone around a conflict point, m.
+    pub conflict_zone_half_m: f64,
+    /// Largest heading error for matching an agent to a lane, rad.
+    pub lane_match_heading_rad: f64,
+    /// An intent counts only at or above this confidence (weak intents are ignored, §4.3).
+    pub intent_confidence_min: f64,
+}
+
+impl Default for OpmParams {
+    fn default() -> Self {
+        Self {
+            delta_ttc_threshold_s: 4.0,
+            proximity_threshold_m: 30.0,
+            ttc_speed_floor_mps: 0.5,
+            ttc_max_s: 30.0,
+            conflict_zone_half_m: 4.0,
+            lane_match_heading_rad: 1.0,
+            intent_confidence_min: 0.7,
+        }
+    }
+}
+
+/// Saliency attention (eq. 7).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SaliencyParams {
+    /// Key vector K, one weight per query feature (see `saliency::FEATURE_NAMES`).
+    pub key: [f64; FEATURES],
+}
+
+impl Default for SaliencyParams {
+    fn default() -> Self {
+        Self { key: FITTED_KEY }
+    }
+}
+
+/// Maneuver utility, logit and its correction (eq. 9–15).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ChoiceParams {
+    /// β for x = [matching, safety, efficiency] (eq. 9).
+    pub beta: [f64; 3],
+    /// γ, weight of history consistency D_prev (eq. 12).
+    pub gamma: f64,
+    /// λ, switch penalty (eq. 14).
+    pub lambda: f64,
+    /// Penalty on a turn against the navigation instruction (matching degree).
+    pub navigation_penalty: f64,
+    /// Gain of the IDM car-following penalty, per m/s² of excess acceleration.
+    pub idm_penalty_gain: f64,
+    /// Nominal acceleration of "accelerate", m/s².
+    pub accelerate_mps2: f64,
+    /// Nominal deceleration of "decelerate", m/s² (positive).
+    pub decelerate_mps2: f64,
+    /// Horizon over which a maneuver reaches its target speed, s.
+    pub maneuver_horizon_s: f64,
+    /// Reference speed for the efficiency degree, m/s.
+    pub reference_speed_mps: f64,
+    /// Desired (free-road) speed, m/s; the speed cap of every maneuver.
+    pub desired_speed_mps: f64,
+    /// IDM: time headway T, s.
+    pub idm_headway_s: f64,
+    /// IDM: standstill gap s0, m.
+    pub idm_min_gap_m: f64,
+    /// IDM: comfortable deceleration b, m/s².
+    pub idm_comfort_decel_mps2: f64,
+    /// IDM: maximum acceleration a, m/s².
+    pub idm_max_accel_mps2: f64,
+    /// Safety preference gains [aggressive, balanced, conservative] of the ego's style.
+    pub ego_style_safety: [f64; 3],
+    /// Efficiency preference gains [aggressive, balanced, conservative] of the ego's style.
+    pub ego_style_efficiency: [f64; 3],
+    /// Efficiency gains [commute, emergency, official, leisure] of the ego's task.
+    pub ego_task_efficiency: [f64; 4],
+    /// Efficiency gain when the passenger asks to accelerate or proceed.
+    pub ego_hurry_efficiency: f64,
+    /// Safety gains [commute, emergency, official, leisure] of an interacting agent's task.
+    pub other_task_safety: [f64; 4],
+    /// Safety gain when an interacting agent is aggressive.
+    pub other_aggressive_safety: f64,
+    /// Safety gain when an interacting agent announces it proceeds or accelerates.
+    pub other_proceeds_safety: f64,
+    /// Efficiency gain when an interacting agent announces it yields or stops.
+    pub other_yields_efficiency: f64,
+    /// Safety gain per risky conflict (scene conflict intensity).
+    pub conflict_intensity_safety: f64,
+}
+
+impl Default for ChoiceParams {
+    fn default() -> Self {
+        Self {
+            beta: [1.0, 4.0, 2.0],
+            gamma: 0.5,
+            lambda: 0.5,
+            navigation_penalty: 5.0,
+            idm_penalty_gain: 1.0,
+            accelerate_mps2: 1.5,
+            decelerate_mps2: 2.0,
+            maneuver_horizon_s: 3.0,
+            reference_speed_mps: 10.0,
+            desired_speed_mps: 13.9,
+            idm_headway_s: 1.5,
+            idm_min_gap_m: 2.0,
+            idm_comfort_decel_mps2: 2.0,
+            idm_max_accel_mps2: 1.5,
+            // Priority task > action > style (§4.1): task gains are the largest.
+            ego_style_safety: [-0.2, 0.0, 0.2],
+            ego_style_efficiency: [0.2, 0.0, -0.2],
+            ego_task_efficiency: [0.0, 0.8, 0.5, -0.2],
+            ego_hurry_efficiency: 0.4,
+            other_task_safety: [0.0, 1.0, 0.6, 0.0],
+            other_aggressive_safety: 0.2,
+            other_proceeds_safety: 0.4,
+            other_yields_efficiency: 0.4,
+            conflict_intensity_safety: 0.1,
+        }
+    }
+}
+
+/// The gate on the LLM's A_final (eq. 16).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AdviceParams {
+    /// Advice must answer a request issued in the last N cycles.
+    pub freshness_cycles: u32,
+    /// Smallest confidence accepted (0.7, §4.3).
+    pub confidence_min: f64,
+    /// Time after a request's issue by which its answer must arrive, s.
+    pub deadline_s: f64,
+}
+
+impl Default for AdviceParams {
+    fn default() -> Self {
+        Self {
+            freshness_cycles: 40,
+            confidence_min: 0.7,
+            deadline_s: 1.5,
+        }
+    }
+}
+
+/// Monte Carlo trajectory sampling and scoring (eq. 17–24, Table 2).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrajectoryParams {
+    /// N_samples, at most `MAX_SAMPLES`.
+    pub samples: usize,
+    /// RNG seed; each cycle uses seed ⊕ cycle, so runs replay exactly.
+    pub seed: u64,
+    /// Planning and collision-check horizon, s.
+    pub horizon_s: f64,
+    /// Time step of trajectory points and checks, s.
+    pub dt_s: f64,
+    /// Relative standard deviation of the terminal speed and duration (eq. 23).
+    pub sigma_rel: f64,
+    /// Standard deviation of the terminal lateral offset, m (additive, the nominal is 0).
+    pub sigma_lateral_m: f64,
+    /// Standard-normal draws are clipped to ±this, so perturbations stay bounded.
+    pub sigma_clip: f64,
+    /// Shortest and longest polynomial duration T, s.
+    pub min_duration_s: f64,
+    pub max_duration_s: f64,
+    /// c_e, efficiency weight of S_k.
+    pub c_efficiency: f64,
+    /// c_s, smoothness weight of S_k.
+    pub c_smoothness: f64,
+    /// c_l, lane-centring weight on |l_T| / max_lateral_offset_m (an addition to Table 2's
+    /// score: without it the terminal offset random-walks between cycles).
+    pub c_lateral: f64,
+    /// T_ref, reference time of S_k, s.
+    pub t_ref_s: f64,
+    /// J_max, jerk-integral normaliser of S_k, m/s².
+    pub j_max_norm: f64,
+    /// Speed limit, m/s.
+    pub max_speed_mps: f64,
+    /// Acceleration limit, m/s².
+    pub max_accel_mps2: f64,
+    /// Braking limit for planned trajectories, m/s² (positive).
+    pub max_brake_mps2: f64,
+    /// Emergency braking of the minimum-risk fallback, m/s² (positive).
+    pub emergency_brake_mps2: f64,
+    /// Longitudinal and lateral jerk limit, m/s³.
+    pub max_jerk_mps3: f64,
+    /// Lateral acceleration limit, on curves and from lateral motion, m/s².
+    pub max_lateral_accel_mps2: f64,
+    /// Curvature limit of the followed path, 1/m.
+    pub max_curvature: f64,
+    /// Below this speed (at the start or the end of a candidate) the lateral offset is held, m/s.
+    pub low_speed_mps: f64,
+    /// Largest |l| of a terminal state, m.
+    pub max_lateral_offset_m: f64,
+    /// Footprint length of the ego and of other vehicles, m.
+    pub vehicle_length_m: f64,
+    /// Footprint width of the ego and of other vehicles, m.
+    pub vehicle_width_m: f64,
+    /// Clearance added around every footprint, m.
+    pub safety_margin_m: f64,
+    /// Growth of that clearance with prediction time (prediction uncertainty), m/s.
+    pub margin_growth_mps: f64,
+    /// Stopping margin before a conflict zone, m.
+    pub stop_margin_m: f64,
+}
+
+impl Default for TrajectoryParams {
+    fn default() -> Self {
+        Self {
+            samples: 1024,
+            seed: 0x5EED_C0C0,
+            horizon_s: 5.0,
+            dt_s: 0.1,
+            sigma_rel: 0.15,
+            sigma_lateral_m: 0.3,
+            sigma_clip: 3.0,
+            min_duration_s: 1.0,
+            max_duration_s: 6.0,
+            c_efficiency: 1.0,
+            c_smoothness: 0.5,
+            c_lateral: 0.3,
+            t_ref_s: 5.0,
+            j_max_norm: 10.0,
+            max_speed_mps: 20.0,
+            max_accel_mps2: 3.0,
+            max_brake_mps2: 5.0,
+            emergency_brake_mps2: 8.0,
+            max_jerk_mps3: 10.0,
+            max_lateral_accel_mps2: 4.0,
+            max_curvature: 0.25,
+            low_speed_mps: 2.0,
+            max_lateral_offset_m: 1.0,
+            vehicle_length_m: 4.8,
+            vehicle_width_m: 2.0,
+            safety_margin_m: 0.5,
+            margin_growth_mps: 0.2,
+            stop_margin_m: 1.0,
+        }
+    }
+}
+
+/// A parameter outside its allowed range.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ParamError {
+    /// Dotted TOML path of the offending key.
+    pub key: &'static str,
+    pub reason: &'static str,
+}
+
+impl core::fmt::Display for ParamError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "parameter `{}`: {}", self.key, self.reason)
+    }
+}
+
+impl Params {
+    /// Checks ranges that the core relies on.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let t = &self.trajectory;
+        let bad = |key, reason| Err(ParamError { key, reason });
+        let all_finite = [
+            self.opm.delta_ttc_threshold_s,
+            self.opm.proximity_threshold_m,
+            self.opm.ttc_speed_floor_mps,
+            self.opm.ttc_max_s,
+            self.advice.confidence_min,
+            self.advice.deadline_s,
+            self.choice.gamma,
+            self.choice.lambda,
+            t.horizon_s,
+            t.dt_s,
+            t.sigma_rel,
+            t.sigma_lateral_m,
+            t.vehicle_length_m,
+            t.vehicle_width_m,
+            t.safety_margin_m,
+        ]
+        .iter()
+        .chain(self.choice.beta.iter())
+        .chain(self.saliency.key.iter())
+        .all(|v| v.is_finite());
+        if !all_finite {
+            return bad("*", "every number must be finite");
+        }
+        if t.samples == 0 || t.samples > MAX_SAMPLES {
+            return bad("trajectory.samples", "must be in 1..=1024");
+        }
+        if t.dt_s <= 0.0 || t.horizon_s <= 0.0 || t.horizon_s / t.dt_s > MAX_STEPS as f64 + 1e-6 {
+            return bad("trajectory.horizon_s", "horizon_s / dt_s must be in 1..=64");
+        }
+        if !(t.min_duration_s > 0.0 && t.min_duration_s <= t.max_duration_s) {
+            return bad(
+                "trajectory.min_duration_s",
+                "need 0 < min_duration_s <= max_duration_s",
+            );
+        }
+        if !(0.0..=1.0).contains(&t.sigma_rel) || t.sigma_clip <= 0.0 || t.sigma_clip > 5.0 {
+            return bad(
+                "trajectory.sigma_rel",
+                "sigma_rel in [0, 1], sigma_clip in (0, 5]",
+            );
+        }
+        if self.opm.ttc_speed_floor_mps <= 0.0 {
+            return bad("opm.ttc_speed_floor_mps", "must be > 0 (eq. 4 guard)");
+        }
+        if !(0.0..=1.0).contains(&self.advice.confidence_min) {
+            return bad("advice.confidence_min", "must be in [0, 1]");
+        }
+        if self.advice.freshness_cycles == 0
+            || self.advice.freshness_cycles as usize > crate::advice::MAX_PENDING
+        {
+            return bad("advice.freshness_cycles", "must be in 1..=256");
+        }
+        if t.max_brake_mps2 <= 0.0 || t.emergency_brake_mps2 < t.max_brake_mps2 {
+            return bad(
+                "trajectory.emergency_brake_mps2",
+                "need 0 < max_brake <= emergency_brake",
+            );
+        }
+        Ok(())
+    }
+}

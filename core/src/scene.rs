@@ -1,0 +1,1090 @@
+//! Scene: agent states 𝓕ᵢ (eq. 1), explicit intents (eq. 8), the intersection morphology
+//! 𝓘 = {P_stop, R_lane, L_ref} (eq. 2), Frenet projection onto lane reference lines, process
+//! states P_ti (eq. 3) and fixed-length history rings H.
+//!
+//! Units: metres, seconds, radians; headings are counter-clockwise from the +x axis.
+
+use libm::{atan2, cos, hypot, sin, sqrt};
+
+/// Most agents one scene carries (besides the ego).
+pub const MAX_AGENTS: usize = 32;
+/// Most lane reference lines in one morphology.
+pub const MAX_LANES: usize = 8;
+/// Most vertices of one lane reference polyline.
+pub const MAX_LANE_POINTS: usize = 64;
+/// Most lane-pair conflict points in one morphology.
+pub const MAX_CONFLICTS: usize = 32;
+/// Samples kept per agent history ring: 2 s at 10 Hz.
+pub const HISTORY_LEN: usize = 20;
+/// Spacing of history samples, s (10 Hz).
+pub const HISTORY_PERIOD_S: f64 = 0.1;
+
+/// A planar vector, m or m/s or m/s².
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Vec2 {
+    pub x: f64,
+    pub y: f64,
+}
+
+impl Vec2 {
+    pub const ZERO: Vec2 = Vec2 { x: 0.0, y: 0.0 };
+    pub const fn new(x: f64, y: f64) -> Self {
+        Self { x, y }
+    }
+    pub fn plus(self, o: Vec2) -> Vec2 {
+        Vec2::new(self.x + o.x, self.y + o.y)
+    }
+    pub fn minus(self, o: Vec2) -> Vec2 {
+        Vec2::new(self.x - o.x, self.y - o.y)
+    }
+    pub fn scale(self, k: f64) -> Vec2 {
+        Vec2::new(self.x * k, self.y * k)
+    }
+    pub fn dot(self, o: Vec2) -> f64 {
+        self.x * o.x + self.y * o.y
+    }
+    pub fn cross(self, o: Vec2) -> f64 {
+        self.x * o.y - self.y * o.x
+    }
+    pub fn norm(self) -> f64 {
+        hypot(self.x, self.y)
+    }
+    pub fn is_finite(self) -> bool {
+        self.x.is_finite() && self.y.is_finite()
+    }
+    /// Unit vector at `angle` rad.
+    pub fn from_angle(angle: f64) -> Vec2 {
+        Vec2::new(cos(angle), sin(angle))
+    }
+}
+
+/// Kind of road user.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[repr(u8)]
+pub enum AgentKind {
+    #[default]
+    Car = 0,
+    Truck = 1,
+    Bus = 2,
+    Motorcycle = 3,
+    Bicycle = 4,
+    Pedestrian = 5,
+    Unknown = 6,
+}
+
+/// Turn-signal state, one of the explicit cues of §4.1.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[repr(u8)]
+pub enum TurnSignal {
+    #[default]
+    Off = 0,
+    Left = 1,
+    Right = 2,
+    Hazard = 3,
+}
+
+/// Driving style I_style (eq. 8).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Style {
+    Aggressive = 0,
+    Balanced = 1,
+    Conservative = 2,
+}
+
+/// Current action I_action (eq. 8) as announced or parsed from language.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum IntentAction {
+    /// "Go ahead", "after you".
+    Yield = 0,
+    /// "I'm going first".
+    Proceed = 1,
+    Accelerate = 2,
+    Decelerate = 3,
+    TurnLeft = 4,
+    TurnRight = 5,
+    Stop = 6,
+}
+
+/// Task I_task (eq. 8); it sets priority.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Task {
+    Commute = 0,
+    Emergency = 1,
+    Official = 2,
+    Leisure = 3,
+}
+
+/// One intent dimension with the confidence of its parse, in [0, 1].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rated<T> {
+    pub value: T,
+    pub confidence: f64,
+}
+
+/// Explicit intent [I_style, I_action, I_task] (eq. 8). `None` means unknown.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ExplicitIntent {
+    pub style: Option<Rated<Style>>,
+    pub action: Option<Rated<IntentAction>>,
+    pub task: Option<Rated<Task>>,
+}
+
+impl ExplicitIntent {
+    /// No intent known.
+    pub const UNKNOWN: ExplicitIntent = ExplicitIntent {
+        style: None,
+        action: None,
+        task: None,
+    };
+
+    /// The style, if its confidence reaches `threshold` (weak intents are ignored, §4.3).
+    pub fn strong_style(&self, threshold: f64) -> Option<Style> {
+        strong(self.style, threshold)
+    }
+    /// The action, if its confidence reaches `threshold`.
+    pub fn strong_action(&self, threshold: f64) -> Option<IntentAction> {
+        strong(self.action, threshold)
+    }
+    /// The task, if its confidence reaches `threshold`.
+    pub fn strong_task(&self, threshold: f64) -> Option<Task> {
+        strong(self.task, threshold)
+    }
+    /// True when any dimension is strong.
+    pub fn any_strong(&self, threshold: f64) -> bool {
+        self.strong_style(threshold).is_some()
+            || self.strong_action(threshold).is_some()
+            || self.strong_task(threshold).is_some()
+    }
+    fn confidences(&self) -> [Option<f64>; 3] {
+        [
+            self.style.map(|r| r.confidence),
+            self.action.map(|r| r.confidence),
+            self.task.map(|r| r.confidence),
+        ]
+    }
+}
+
+fn strong<T: Copy>(r: Option<Rated<T>>, threshold: f64) -> Option<T> {
+    r.filter(|r| r.confidence >= threshold).map(|r| r.value)
+}
+
+/// Agent state 𝓕ᵢ = [x, y, vˣ, vʸ, aˣ, aʸ, φ] (eq. 1) with identity and explicit cues.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AgentState {
+    /// Track id, stable across frames.
+    pub id: u32,
+    pub kind: AgentKind,
+    /// Position, m.
+    pub pos: Vec2,
+    /// Velocity, m/s.
+    pub vel: Vec2,
+    /// Acceleration, m/s².
+    pub acc: Vec2,
+    /// Heading φ, rad.
+    pub heading: f64,
+    pub turn_signal: TurnSignal,
+    /// Explicit intent parsed from this road user's language or signals (eq. 8).
+    pub intent: ExplicitIntent,
+}
+
+impl AgentState {
+    /// Speed |v|, m/s.
+    pub fn speed(&self) -> f64 {
+        self.vel.norm()
+    }
+    /// Acceleration along the velocity (or heading when stopped), m/s².
+    pub fn longitudinal_accel(&self) -> f64 {
+        let dir = self.direction();
+        self.acc.dot(dir)
+    }
+    /// Unit direction of travel: the velocity's, or the heading's when nearly stopped.
+    pub fn direction(&self) -> Vec2 {
+        let v = self.speed();
+        if v > 0.1 {
+            self.vel.scale(1.0 / v)
+        } else {
+            Vec2::from_angle(self.heading)
+        }
+    }
+}
+
+/// One perception frame: the ego and up to [`MAX_AGENTS`] other road users.
+#[derive(Clone, Copy, Debug)]
+pub struct Scene {
+    /// Frame timestamp, s (the caller's monotonic clock).
+    pub time_s: f64,
+    /// Ego state; its `intent` is the passenger's explicit intent I_explicitEgo.
+    pub ego: AgentState,
+    /// Index of the ego's route lane in the morphology; the lane's turn is the navigation
+    /// instruction.
+    pub ego_lane: u8,
+    pub agents: [AgentState; MAX_AGENTS],
+    /// Valid entries at the front of `agents`.
+    pub n_agents: usize,
+}
+
+impl Scene {
+    /// A scene with the ego only.
+    pub fn new(time_s: f64, ego: AgentState, ego_lane: u8) -> Self {
+        Scene {
+            time_s,
+            ego,
+            ego_lane,
+            agents: [AgentState::default(); MAX_AGENTS],
+            n_agents: 0,
+        }
+    }
+    /// Adds an agent; returns false when the scene is full.
+    pub fn push(&mut self, agent: AgentState) -> bool {
+        if self.n_agents >= MAX_AGENTS {
+            return false;
+        }
+        self.agents[self.n_agents] = agent;
+        self.n_agents += 1;
+        true
+    }
+    /// The valid agents.
+    pub fn agents(&self) -> &[AgentState] {
+        &self.agents[..self.n_agents.min(MAX_AGENTS)]
+    }
+}
+
+/// Which field of a scene failed validation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SceneField {
+    Time,
+    AgentCount,
+    EgoLane,
+    Position,
+    Velocity,
+    Acceleration,
+    Heading,
+    IntentConfidence,
+}
+
+/// Why a scene was rejected.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SceneErrorKind {
+    /// NaN or ±∞.
+    NotFinite,
+    /// Finite but outside the plausible range set in `Params::limits`.
+    OutOfRange,
+}
+
+/// A rejected scene: which agent (`None` = ego or frame), which field, why.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SceneError {
+    pub agent: Option<u8>,
+    pub field: SceneField,
+    pub kind: SceneErrorKind,
+}
+
+/// Plausibility bounds for scene validation.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InputLimits {
+    /// Largest |timestamp| accepted, s.
+    pub max_abs_time_s: f64,
+    /// Largest |x|, |y| accepted, m.
+    pub max_abs_position_m: f64,
+    /// Largest speed accepted, m/s.
+    pub max_speed_mps: f64,
+    /// Largest |acceleration| accepted, m/s².
+    pub max_accel_mps2: f64,
+}
+
+impl Default for InputLimits {
+    fn default() -> Self {
+        Self {
+            max_abs_time_s: 1e12,
+            max_abs_position_m: 10_000.0,
+            max_speed_mps: 70.0,
+            max_accel_mps2: 30.0,
+        }
+    }
+}
+
+impl Scene {
+    /// Checks every number of the frame: finite and within `limits`. Never panics.
+    pub fn validate(&self, limits: &InputLimits, n_lanes: usize) -> Result<(), SceneError> {
+        let err = |agent, field, kind| Err(SceneError { agent, field, kind });
+        if !self.time_s.is_finite() {
+            return err(None, SceneField::Time, SceneErrorKind::NotFinite);
+        }
+        if self.time_s.abs() > limits.max_abs_time_s {
+            return err(None, SceneField::Time, SceneErrorKind::OutOfRange);
+        }
+        if self.n_agents > MAX_AGENTS {
+            return err(None, SceneField::AgentCount, SceneErrorKind::OutOfRange);
+        }
+        if self.ego_lane as usize >= n_lanes {
+            return err(None, SceneField::EgoLane, SceneErrorKind::OutOfRange);
+        }
+        check_agent(&self.ego, limits).map_err(|(field, kind)| SceneError {
+            agent: None,
+            field,
+            kind,
+        })?;
+        for (i, a) in self.agents().iter().enumerate() {
+            check_agent(a, limits).map_err(|(field, kind)| SceneError {
+                agent: Some(i as u8),
+                field,
+                kind,
+            })?;
+        }
+        Ok(())
+    }
+}
+
+fn check_agent(a: &AgentState, lim: &InputLimits) -> Result<(), (SceneField, SceneErrorKind)> {
+    use SceneErrorKind::*;
+    let check = |v: Vec2, max: f64, field| {
+        if !v.is_finite() {
+            Err((field, NotFinite))
+        } else if v.x.abs() > max || v.y.abs() > max {
+            Err((field, OutOfRange))
+        } else {
+            Ok(())
+        }
+    };
+    check(a.pos, lim.max_abs_position_m, SceneField::Position)?;
+    check(a.vel, lim.max_speed_mps, SceneField::Velocity)?;
+    check(a.acc, lim.max_accel_mps2, SceneField::Acceleration)?;
+    if !a.heading.is_finite() {
+        return Err((SceneField::Heading, NotFinite));
+    }
+    if a.heading.abs() > 100.0 {
+        return Err((SceneField::Heading, OutOfRange));
+    }
+    for c in a.intent.confidences().into_iter().flatten() {
+        if !c.is_finite() {
+            return Err((SceneField::IntentConfidence, NotFinite));
+        }
+        if !(0.0..=1.0).contains(&c) {
+            return Err((SceneField::IntentConfidence, OutOfRange));
+        }
+    }
+    Ok(())
+}
+
+/// Turn a lane makes through the junction; for the ego's route lane it is the navigation
+/// instruction.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Turn {
+    #[default]
+    Straight = 0,
+    Left = 1,
+    Right = 2,
+}
+
+/// A point of a lane reference line in Frenet coordinates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frenet {
+    /// Arc length along the reference line, m.
+    pub s: f64,
+    /// Signed lateral offset, m, positive to the left.
+    pub l: f64,
+    /// Tangent angle of the reference line at `s`, rad.
+    pub tangent: f64,
+    /// Segment index, a hint for the next lookup.
+    pub segment: usize,
+}
+
+/// One lane: its centre reference line L_ref, boundary half-width R_lane and stop line P_stop
+/// (eq. 2).
+#[derive(Clone, Copy, Debug)]
+pub struct Lane {
+    points: [Vec2; MAX_LANE_POINTS],
+    /// Cumulative arc length at each vertex, m.
+    cum_s: [f64; MAX_LANE_POINTS],
+    /// Unsigned curvature at each vertex, 1/m (Menger curvature of neighbours).
+    kappa: [f64; MAX_LANE_POINTS],
+    /// Tangent angle at each vertex, rad: the direction from the previous to the next vertex.
+    /// Tangents and normals are interpolated between vertices, so the Frenet frame turns
+    /// smoothly instead of jumping at every vertex of the polyline.
+    vertex_tangent: [f64; MAX_LANE_POINTS],
+    /// Turn of the tangent over each segment, rad, wrapped to (−π, π].
+    segment_turn: [f64; MAX_LANE_POINTS],
+    n: usize,
+    /// Half the lane width, m.
+    pub half_width: f64,
+    /// Arc length of the stop line P_stop, m.
+    pub stop_s: f64,
+    /// Turn through the junction.
+    pub turn: Turn,
+}
+
+/// Why a lane or morphology could not be built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GeometryError {
+    TooFewPoints,
+    TooManyPoints,
+    TooManyLanes,
+    NotFinite,
+    DuplicatePoint,
+}
+
+impl Lane {
+    /// Builds a lane from its reference polyline. Points must be distinct and finite.
+    pub fn new(
+        points: &[Vec2],
+        half_width: f64,
+        stop_s: f64,
+        turn: Turn,
+    ) -> Result<Self, GeometryError> {
+        if points.len() < 2 {
+            return Err(GeometryError::TooFewPoints);
+        }
+        if points.len() > MAX_LANE_POINTS {
+            return Err(GeometryError::TooManyPoints);
+        }
+        if points.iter().any(|p| !p.is_finite()) || !half_width.is_finite() || !stop_s.is_finite() {
+            return Err(GeometryError::NotFinite);
+        }
+        let mut lane = Lane {
+            points: [Vec2::ZERO; MAX_LANE_POINTS],
+            cum_s: [0.0; MAX_LANE_POINTS],
+            kappa: [0.0; MAX_LANE_POINTS],
+            vertex_tangent: [0.0; MAX_LANE_POINTS],
+            segment_turn: [0.0; MAX_LANE_POINTS],
+            n: points.len(),
+            half_width,
+            stop_s,
+            turn,
+        };
+        lane.points[..points.len()].copy_from_slice(points);
+        for i in 1..points.len() {
+            let d = points[i].minus(points[i - 1]).norm();
+            if d < 1e-6 {
+                return Err(GeometryError::DuplicatePoint);
+            }
+            lane.cum_s[i] = lane.cum_s[i - 1] + d;
+        }
+        let last = points.len() - 1;
+        for i in 0..=last {
+            let d = points[(i + 1).min(last)].minus(points[i.saturating_sub(1)]);
+            lane.vertex_tangent[i] = atan2(d.y, d.x);
+        }
+        for i in 0..last {
+            lane.segment_turn[i] = libm::remainder(
+                lane.vertex_tangent[i + 1] - lane.vertex_tangent[i],
+                core::f64::consts::TAU,
+            );
+        }
+        for i in 1..points.len() - 1 {
+            let (a, b, c) = (points[i - 1], points[i], points[i + 1]);
+            let area2 = b.minus(a).cross(c.minus(a)).abs();
+            let denom = b.minus(a).norm() * c.minus(b).norm() * c.minus(a).norm();
+            lane.kappa[i] = 2.0 * area2 / denom;
+        }
+        Ok(lane)
+    }
+
+    /// Builder for polylines made of straight runs and circular arcs.
+    pub fn builder(start: Vec2) -> LaneBuilder {
+        LaneBuilder::new(start)
+    }
+
+    /// Vertices of the reference line.
+    pub fn points(&self) -> &[Vec2] {
+        &self.points[..self.n]
+    }
+    /// Total length, m.
+    pub fn length(&self) -> f64 {
+        self.cum_s[self.n - 1]
+    }
+    /// Number of segments.
+    pub fn segments(&self) -> usize {
+        self.n - 1
+    }
+    /// Arc length at vertex `i`, m.
+    pub fn s_at_vertex(&self, i: usize) -> f64 {
+        self.cum_s[i]
+    }
+
+    /// Segment holding arc length `s`, searched from `hint` (amortised O(1) for monotone `s`).
+    pub fn segment_at(&self, s: f64, hint: usize) -> usize {
+        let mut i = hint.min(self.n - 2);
+        while i + 1 < self.n - 1 && s > self.cum_s[i + 1] {
+            i += 1;
+        }
+        while i > 0 && s < self.cum_s[i] {
+            i -= 1;
+        }
+        i
+    }
+
+    /// Cartesian point and tangent angle at arc length `s` (linear extrapolation past the ends).
+    pub fn pose_at(&self, s: f64, hint: usize) -> (Vec2, f64, usize) {
+        let i = self.segment_at(s, hint);
+        let (a, b) = (self.points[i], self.points[i + 1]);
+        let len = self.cum_s[i + 1] - self.cum_s[i];
+        let u = (s - self.cum_s[i]) / len;
+        (a.plus(b.minus(a).scale(u)), self.tangent_in(i, u), i)
+    }
+
+    /// Tangent angle at fraction `u` of segment `i`, interpolated between its vertices.
+    fn tangent_in(&self, i: usize, u: f64) -> f64 {
+        self.vertex_tangent[i] + self.segment_turn[i] * u.clamp(0.0, 1.0)
+    }
+
+    /// Cartesian point at Frenet (s, l).
+    pub fn to_cartesian(&self, s: f64, l: f64, hint: usize) -> (Vec2, f64, usize) {
+        let (p, tangent, i) = self.pose_at(s, hint);
+        let normal = Vec2::new(-sin(tangent), cos(tangent));
+        (p.plus(normal.scale(l)), tangent, i)
+    }
+
+    /// Reference curvature at arc length `s`, 1/m (largest of the segment's two vertices).
+    pub fn curvature_at(&self, s: f64, hint: usize) -> f64 {
+        let i = self.segment_at(s, hint);
+        self.kappa[i].max(self.kappa[i + 1])
+    }
+
+    /// Projects `p` onto segments `first..last` (exclusive) of the reference line.
+    pub fn project_range(&self, p: Vec2, first: usize, last: usize) -> Frenet {
+        let last = last.min(self.n - 1).max(first + 1);
+        let mut best = Frenet {
+            s: 0.0,
+            l: f64::INFINITY,
+            tangent: 0.0,
+            segment: first,
+        };
+        let mut best_d2 = f64::INFINITY;
+        for i in first..last {
+            let (a, b) = (self.points[i], self.points[i + 1]);
+            let d = b.minus(a);
+            let len = self.cum_s[i + 1] - self.cum_s[i];
+            let rel = p.minus(a);
+            let mut u = rel.dot(d) / (len * len);
+            // Extrapolate beyond the first and last vertex so that s stays meaningful there.
+            if i > 0 {
+                u = u.max(0.0);
+            }
+            if i + 2 < self.n {
+                u = u.min(1.0);
+            }
+            let foot = a.plus(d.scale(u));
+            let off = p.minus(foot);
+            let d2 = off.dot(off);
+            if d2 < best_d2 {
+                best_d2 = d2;
+                let side = d.cross(rel);
+                best = Frenet {
+                    s: self.cum_s[i] + u * len,
+                    l: sqrt(d2).copysign(side),
+                    tangent: self.tangent_in(i, u),
+                    segment: i,
+                };
+            }
+        }
+        best
+    }
+
+    /// Projects `p` onto the whole reference line.
+    pub fn project(&self, p: Vec2) -> Frenet {
+        self.project_range(p, 0, self.n - 1)
+    }
+}
+
+/// Builds a lane reference polyline from straight runs and circular arcs.
+#[derive(Clone, Copy, Debug)]
+pub struct LaneBuilder {
+    points: [Vec2; MAX_LANE_POINTS],
+    n: usize,
+    overflow: bool,
+}
+
+impl LaneBuilder {
+    fn new(start: Vec2) -> Self {
+        let mut points = [Vec2::ZERO; MAX_LANE_POINTS];
+        points[0] = start;
+        LaneBuilder {
+            points,
+            n: 1,
+            overflow: false,
+        }
+    }
+    fn push(mut self, p: Vec2) -> Self {
+        if self.n < MAX_LANE_POINTS {
+            self.points[self.n] = p;
+            self.n += 1;
+        } else {
+            self.overflow = true;
+        }
+        self
+    }
+    /// Straight run to `p`.
+    pub fn line_to(self, p: Vec2) -> Self {
+        self.push(p)
+    }
+    /// Circular arc about `centre` from the current point through `sweep` rad
+    /// (positive = counter-clockwise), sampled at most `step` m apart.
+    pub fn arc(mut self, centre: Vec2, sweep: f64, step: f64) -> Self {
+        let start = self.points[self.n - 1];
+        let r = start.minus(centre).norm();
+        let a0 = atan2(start.y - centre.y, start.x - centre.x);
+        let k = libm::ceil((r * sweep.abs()) / step).max(1.0) as usize;
+        for j in 1..=k {
+            let a = a0 + sweep * j as f64 / k as f64;
+            self = self.push(centre.plus(Vec2::from_angle(a).scale(r)));
+        }
+        self
+    }
+    /// Finishes the lane.
+    pub fn build(self, half_width: f64, stop_s: f64, turn: Turn) -> Result<Lane, GeometryError> {
+        if self.overflow {
+            return Err(GeometryError::TooManyPoints);
+        }
+        Lane::new(&self.points[..self.n], half_width, stop_s, turn)
+    }
+}
+
+/// Where two lane reference lines cross or merge.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ConflictPoint {
+    pub lane_a: u8,
+    pub lane_b: u8,
+    /// Arc length of the point on lane a, m.
+    pub s_a: f64,
+    /// Arc length of the point on lane b, m.
+    pub s_b: f64,
+    pub pos: Vec2,
+}
+
+/// Built-in geometries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BuiltIn {
+    /// The paper's unsignalised intersection (§6.1): centre at the origin, lanes at ±5 m.
+    PaperIntersection,
+    /// A single-lane on-ramp merging into a main lane (§6, Fig. 7).
+    Merge,
+}
+
+/// Lane indices of [`BuiltIn::PaperIntersection`].
+pub mod paper {
+    /// Westbound from (40, 5), turning left to southbound: the CAV's route.
+    pub const CAV_LEFT: u8 = 0;
+    /// Eastbound straight from (−40, −5): the HDV's route.
+    pub const HDV_STRAIGHT: u8 = 1;
+    /// Westbound straight from (40, 5).
+    pub const WEST_STRAIGHT: u8 = 2;
+    /// Eastbound from (−40, −5), turning left to northbound.
+    pub const EAST_LEFT: u8 = 3;
+    /// Northbound straight from (5, −40).
+    pub const NORTH_STRAIGHT: u8 = 4;
+    /// Southbound straight from (−5, 40).
+    pub const SOUTH_STRAIGHT: u8 = 5;
+    /// Westbound from (40, 5), turning right to northbound.
+    pub const WEST_RIGHT: u8 = 6;
+    /// Eastbound from (−40, −5), turning right to southbound.
+    pub const EAST_RIGHT: u8 = 7;
+}
+
+/// Lane indices of [`BuiltIn::Merge`].
+pub mod merge {
+    /// Main carriageway, eastbound along y = 0 from x = −150.
+    pub const MAIN: u8 = 0;
+    /// On-ramp from (−150, −12), joining the main lane at the origin: the CAV's route.
+    pub const RAMP: u8 = 1;
+}
+
+/// Intersection morphology 𝓘 = {P_stop, R_lane, L_ref} (eq. 2) with its conflict points.
+#[derive(Clone, Copy, Debug)]
+pub struct Morphology {
+    lanes: [Lane; MAX_LANES],
+    n_lanes: usize,
+    conflicts: [ConflictPoint; MAX_CONFLICTS],
+    n_conflicts: usize,
+}
+
+impl Morphology {
+    /// Builds a morphology and finds every conflict point between lanes that do not share
+    /// their start (lanes of one approach diverge rather than conflict).
+    pub fn new(lanes: &[Lane]) -> Result<Self, GeometryError> {
+        if lanes.is_empty() {
+            return Err(GeometryError::TooFewPoints);
+        }
+        if lanes.len() > MAX_LANES {
+            return Err(GeometryError::TooManyLanes);
+        }
+        let mut m = Morphology {
+            lanes: [lanes[0]; MAX_LANES],
+            n_lanes: lanes.len(),
+            conflicts: [ConflictPoint {
+                lane_a: 0,
+                lane_b: 0,
+                s_a: 0.0,
+                s_b: 0.0,
+                pos: Vec2::ZERO,
+            }; MAX_CONFLICTS],
+            n_conflicts: 0,
+        };
+        m.lanes[..lanes.len()].copy_from_slice(lanes);
+        for a in 0..lanes.len() {
+            for b in a + 1..lanes.len() {
+                if lanes[a].points[0].minus(lanes[b].points[0]).norm() < 0.5 {
+                    continue;
+                }
+                if let Some((s_a, s_b, pos)) = first_contact(&lanes[a], &lanes[b]) {
+                    if m.n_conflicts == MAX_CONFLICTS {
+                        return Err(GeometryError::TooManyLanes);
+                    }
+                    m.conflicts[m.n_conflicts] = ConflictPoint {
+                        lane_a: a as u8,
+                        lane_b: b as u8,
+                        s_a,
+                        s_b,
+                        pos,
+                    };
+                    m.n_conflicts += 1;
+                }
+            }
+        }
+        Ok(m)
+    }
+
+    /// One of the built-in geometries.
+    pub fn built_in(which: BuiltIn) -> Self {
+        let lanes = match which {
+            BuiltIn::PaperIntersection => paper_lanes(),
+            BuiltIn::Merge => {
+                return Morphology::new(&[merge_main(), merge_ramp()])
+                    .expect("built-in merge geometry is valid")
+            }
+        };
+        Morphology::new(&lanes).expect("built-in intersection geometry is valid")
+    }
+
+    pub fn lanes(&self) -> &[Lane] {
+        &self.lanes[..self.n_lanes]
+    }
+    pub fn lane(&self, i: u8) -> &Lane {
+        &self.lanes[i as usize]
+    }
+    pub fn conflicts(&self) -> &[ConflictPoint] {
+        &self.conflicts[..self.n_conflicts]
+    }
+
+    /// Conflict point between lanes `a` and `b`, as (s on a, s on b).
+    pub fn conflict_between(&self, a: u8, b: u8) -> Option<(f64, f64)> {
+        self.conflicts().iter().find_map(|c| {
+            if c.lane_a == a && c.lane_b == b {
+                Some((c.s_a, c.s_b))
+            } else if c.lane_a == b && c.lane_b == a {
+                Some((c.s_b, c.s_a))
+            } else {
+                None
+            }
+        })
+    }
+
+    /// Lane that best explains an agent's pose: within the lane boundary and heading within
+    /// `max_heading_err` rad of the tangent; the smallest |l| wins. Returns (lane, Frenet).
+    pub fn match_lane(&self, pos: Vec2, dir: Vec2, max_heading_err: f64) -> Option<(u8, Frenet)> {
+        let mut best: Option<(u8, Frenet)> = None;
+        for (i, lane) in self.lanes().iter().enumerate() {
+            let f = lane.project(pos);
+            if f.l.abs() > lane.half_width
+                || f.s < -lane.half_width
+                || f.s > lane.length() + lane.half_width
+            {
+                continue;
+            }
+            let t = Vec2::from_angle(f.tangent);
+            let err = atan2(t.cross(dir), t.dot(dir)).abs();
+            if err > max_heading_err {
+                continue;
+            }
+            if best.is_none_or(|(_, b)| f.l.abs() < b.l.abs() - 1e-9) {
+                best = Some((i as u8, f));
+            }
+        }
+        best
+    }
+}
+
+/// First point along `a` where it touches `b`: (s on a, s on b, point).
+fn first_contact(a: &Lane, b: &Lane) -> Option<(f64, f64, Vec2)> {
+    const EPS: f64 = 1e-9;
+    for i in 0..a.segments() {
+        let (p, p2) = (a.points[i], a.points[i + 1]);
+        let r = p2.minus(p);
+        let mut best: Option<(f64, f64, Vec2)> = None;
+        for j in 0..b.segments() {
+            let (q, q2) = (b.points[j], b.points[j + 1]);
+            let sv = q2.minus(q);
+            let denom = r.cross(sv);
+            if denom.abs() < EPS {
+                continue;
+            }
+            let qp = q.minus(p);
+            let t = qp.cross(sv) / denom;
+            let u = qp.cross(r) / denom;
+            if (-1e-6..=1.0 + 1e-6).contains(&t) && (-1e-6..=1.0 + 1e-6).contains(&u) {
+                let s_a = a.cum_s[i] + t * (a.cum_s[i + 1] - a.cum_s[i]);
+                let s_b = b.cum_s[j] + u * (b.cum_s[j + 1] - b.cum_s[j]);
+                if best.is_none_or(|(bs, _, _)| s_a < bs) {
+                    best = Some((s_a, s_b, p.plus(r.scale(t))));
+                }
+            }
+        }
+        if best.is_some() {
+            return best;
+        }
+    }
+    None
+}
+
+const ARC_STEP_M: f64 = 1.0;
+const PAPER_HALF_WIDTH_M: f64 = 2.5;
+
+fn paper_lanes() -> [Lane; 8] {
+    use core::f64::consts::FRAC_PI_2;
+    let v = Vec2::new;
+    let hw = PAPER_HALF_WIDTH_M;
+    // Approaches run 40 m to the junction box |x|, |y| ≤ 10; stop lines at its edge (s = 30).
+    let lane = |b: LaneBuilder, turn| b.build(hw, 30.0, turn).expect("valid built-in lane");
+    [
+        lane(
+            Lane::builder(v(40.0, 5.0))
+                .line_to(v(5.0, 5.0))
+                .arc(v(5.0, -5.0), FRAC_PI_2, ARC_STEP_M)
+                .line_to(v(-5.0, -40.0)),
+            Turn::Left,
+        ),
+        lane(
+            Lane::builder(v(-40.0, -5.0)).line_to(v(40.0, -5.0)),
+            Turn::Straight,
+        ),
+        lane(
+            Lane::builder(v(40.0, 5.0)).line_to(v(-40.0, 5.0)),
+            Turn::Straight,
+        ),
+        lane(
+            Lane::builder(v(-40.0, -5.0))
+                .line_to(v(-5.0, -5.0))
+                .arc(v(-5.0, 5.0), FRAC_PI_2, ARC_STEP_M)
+                .line_to(v(5.0, 40.0)),
+            Turn::Left,
+        ),
+        lane(
+            Lane::builder(v(5.0, -40.0)).line_to(v(5.0, 40.0)),
+            Turn::Straight,
+        ),
+        lane(
+            Lane::builder(v(-5.0, 40.0)).line_to(v(-5.0, -40.0)),
+            Turn::Straight,
+        ),
+        lane(
+            Lane::builder(v(40.0, 5.0))
+                .line_to(v(10.0, 5.0))
+                .arc(v(10.0, 10.0), -FRAC_PI_2, ARC_STEP_M)
+                .line_to(v(5.0, 40.0)),
+            Turn::Right,
+        ),
+        lane(
+            Lane::builder(v(-40.0, -5.0))
+                .line_to(v(-10.0, -5.0))
+                .arc(v(-10.0, -10.0), -FRAC_PI_2, ARC_STEP_M)
+                .line_to(v(-5.0, -40.0)),
+            Turn::Right,
+        ),
+    ]
+}
+
+fn merge_main() -> Lane {
+    Lane::builder(Vec2::new(-150.0, 0.0))
+        .line_to(Vec2::new(150.0, 0.0))
+        .build(1.8, 150.0, Turn::Straight)
+        .expect("valid built-in lane")
+}
+
+fn merge_ramp() -> Lane {
+    // Ramp parallel to the main lane, then a 60 m taper that joins it at the origin.
+    Lane::builder(Vec2::new(-150.0, -12.0))
+        .line_to(Vec2::new(-60.0, -12.0))
+        .line_to(Vec2::new(0.0, 0.0))
+        .line_to(Vec2::new(150.0, 0.0))
+        .build(1.8, 90.0, Turn::Straight)
+        .expect("valid built-in lane")
+}
+
+/// Process state P_ti = (p, v, a, θ_v, θ_a, l) of one agent (eq. 3).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ProcessState {
+    /// Signed distance to the lane's stop line, m (positive before it).
+    pub dist_to_stop_m: f64,
+    /// Speed, m/s.
+    pub speed_mps: f64,
+    /// Acceleration along the direction of travel, m/s².
+    pub accel_mps2: f64,
+    /// Angle between velocity and lane direction θ_v, rad.
+    pub theta_v: f64,
+    /// Angle between acceleration and lane direction θ_a, rad (0 when |a| ≈ 0).
+    pub theta_a: f64,
+    /// Matched lane l_i, or `None` when the agent is off every lane.
+    pub lane: Option<u8>,
+    /// Arc length on the matched lane, m.
+    pub s_m: f64,
+    /// Lateral offset on the matched lane, m.
+    pub l_m: f64,
+}
+
+impl ProcessState {
+    /// Computes P_ti (eq. 3) of an agent in the morphology.
+    pub fn of(agent: &AgentState, morph: &Morphology, max_heading_err: f64) -> Self {
+        let speed = agent.speed();
+        let dir = agent.direction();
+        let a_mag = agent.acc.norm();
+        match morph.match_lane(agent.pos, dir, max_heading_err) {
+            Some((lane_id, f)) => {
+                let lane = morph.lane(lane_id);
+                let t = Vec2::from_angle(f.tangent);
+                let angle_to = |v: Vec2| atan2(t.cross(v), t.dot(v));
+                ProcessState {
+                    dist_to_stop_m: lane.stop_s - f.s,
+                    speed_mps: speed,
+                    accel_mps2: agent.longitudinal_accel(),
+                    theta_v: if speed > 0.1 {
+                        angle_to(agent.vel)
+                    } else {
+                        angle_to(dir)
+                    },
+                    theta_a: if a_mag > 0.05 {
+                        angle_to(agent.acc)
+                    } else {
+                        0.0
+                    },
+                    lane: Some(lane_id),
+                    s_m: f.s,
+                    l_m: f.l,
+                }
+            }
+            None => ProcessState {
+                dist_to_stop_m: f64::INFINITY,
+                speed_mps: speed,
+                accel_mps2: agent.longitudinal_accel(),
+                theta_v: 0.0,
+                theta_a: 0.0,
+                lane: None,
+                s_m: 0.0,
+                l_m: 0.0,
+            },
+        }
+    }
+}
+
+/// One sample of an agent's history h_i: position and velocity at a time.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HistorySample {
+    pub time_s: f64,
+    pub pos: Vec2,
+    pub vel: Vec2,
+}
+
+/// History ring of one tracked agent: the last 2 s at 10 Hz.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Track {
+    pub id: u32,
+    samples: [HistorySample; HISTORY_LEN],
+    head: usize,
+    len: usize,
+    last_seen_s: f64,
+}
+
+impl Track {
+    /// Samples, oldest first.
+    pub fn iter(&self) -> impl Iterator<Item = &HistorySample> {
+        let start = (self.head + HISTORY_LEN - self.len) % HISTORY_LEN;
+        (0..self.len).map(move |k| &self.samples[(start + k) % HISTORY_LEN])
+    }
+    /// Number of samples held.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+    /// The oldest sample no older than `age_s` before `now`, if any.
+    pub fn sample_ago(&self, now: f64, age_s: f64) -> Option<&HistorySample> {
+        self.iter().find(|h| now - h.time_s <= age_s + 1e-9)
+    }
+    fn record(&mut self, now: f64, a: &AgentState) {
+        self.last_seen_s = now;
+        if self.len > 0 {
+            let newest = &self.samples[(self.head + HISTORY_LEN - 1) % HISTORY_LEN];
+            if now - newest.time_s < HISTORY_PERIOD_S - 1e-9 {
+                return;
+            }
+        }
+        self.samples[self.head] = HistorySample {
+            time_s: now,
+            pos: a.pos,
+            vel: a.vel,
+        };
+        self.head = (self.head + 1) % HISTORY_LEN;
+        self.len = (self.len + 1).min(HISTORY_LEN);
+    }
+}
+
+/// History rings H for every tracked agent, matched by id; the least recently seen slot is
+/// reused for a new id.
+#[derive(Clone, Copy, Debug)]
+pub struct History {
+    tracks: [Track; MAX_AGENTS],
+    used: [bool; MAX_AGENTS],
+}
+
+impl Default for History {
+    fn default() -> Self {
+        History {
+            tracks: [Track::default(); MAX_AGENTS],
+            used: [false; MAX_AGENTS],
+        }
+    }
+}
+
+impl History {
+    /// Records the scene's agents at time `now`.
+    pub fn record(&mut self, now: f64, agents: &[AgentState]) {
+        for a in agents {
+            let slot = self.slot_for(a.id);
+            if !self.used[slot] || self.tracks[slot].id != a.id {
+                self.tracks[slot] = Track {
+                    id: a.id,
+                    ..Track::default()
+                };
+                self.used[slot] = true;
+            }
+            self.tracks[slot].record(now, a);
+        }
+    }
+
+    /// The track of agent `id`.
+    pub fn track(&self, id: u32) -> Option<&Track> {
+        (0..MAX_AGENTS)
+            .find(|&i| self.used[i] && self.tracks[i].id == id)
+            .map(|i| &self.tracks[i])
+    }
+
+    fn slot_for(&self, id: u32) -> usize {
+        if let Some(i) = (0..MAX_AGENTS).find(|&i| self.used[i] && self.tracks[i].id == id) {
+            return i;
+        }
+        if let Some(i) = (0..MAX_AGENTS).find(|&i| !self.used[i]) {
+            return i;
+        }
+        let mut oldest = 0;
+        for i in 1..MAX_AGENTS {
+            if self.tracks[i].last_seen_s < self.tracks[oldest].last_seen_s {
+                oldest = i;
+            }
+        }
+        oldest
+    }
+}

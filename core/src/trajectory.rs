@@ -1,0 +1,864 @@
+//! Trajectory generation: quartic s(t) (eq. 17, 19–20) and quintic l(t) (eq. 18, 21–22) in the
+//! Frenet frame of the ego's lane, Monte Carlo terminal states s_end = f_a(s_start) ⊙ (1 + σ𝒩)
+//! (eq. 23), candidates τ_k (eq. 24) scored by S_k = c_e·T_n/T_ref + c_s·∫|jerk|/J_max
+//! (Table 2) plus a lane-centring term c_l·|l_T|/l_max, hard limits and collision checks, and
+//! the minimum-risk fallback.
+//!
+//! Speed comes from analytic limit checks: s̈ is quadratic and l̈ cubic, so every extremum of
+//! speed, acceleration and jerk is found from polynomial roots in O(1), and the jerk integrals
+//! are total variations of the accelerations. Only position needs the time grid: each point is
+//! tested against a per-step occupancy of the ego's lane (boxes in (s, l)) built once per cycle
+//! from the predicted paths of the other road users, with a whole-step rejection interval first.
+
+use libm::{cos, fabs, sin, sqrt};
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use rand_distr::StandardNormal;
+
+use crate::choice::Profile;
+use crate::params::TrajectoryParams;
+use crate::scene::{AgentState, Lane, Morphology, ProcessState, Vec2, MAX_AGENTS};
+
+/// Most Monte Carlo samples per cycle.
+pub const MAX_SAMPLES: usize = 1024;
+/// Most time steps of the horizon.
+pub const MAX_STEPS: usize = 64;
+/// Trajectory points: t = 0 and every step.
+pub const MAX_POINTS: usize = MAX_STEPS + 1;
+/// Occupancy boxes per time step; on overflow boxes are merged conservatively.
+pub const MAX_BOXES: usize = 8;
+/// Bins of the curvature speed-cap table.
+pub const VCAP_BINS: usize = 256;
+
+/// s(t) = a₀ + a₁t + a₂t² + a₃t³ + a₄t⁴ (eq. 17).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Quartic {
+    pub c: [f64; 5],
+}
+
+impl Quartic {
+    /// Fits s(0) = s₀, ṡ(0) = v₀, s̈(0) = a₀ (eq. 19) and ṡ(T) = v_T, s̈(T) = a_T (eq. 20).
+    pub fn fit(s0: f64, v0: f64, a0: f64, vt: f64, at: f64, t: f64) -> Self {
+        let a = vt - v0 - a0 * t;
+        let b = at - a0;
+        let t2 = t * t;
+        let c4 = (b * t - 2.0 * a) / (4.0 * t2 * t);
+        let c3 = (a - 4.0 * c4 * t2 * t) / (3.0 * t2);
+        Quartic {
+            c: [s0, v0, 0.5 * a0, c3, c4],
+        }
+    }
+    pub fn pos(&self, t: f64) -> f64 {
+        let c = &self.c;
+        c[0] + t * (c[1] + t * (c[2] + t * (c[3] + t * c[4])))
+    }
+    pub fn vel(&self, t: f64) -> f64 {
+        let c = &self.c;
+        c[1] + t * (2.0 * c[2] + t * (3.0 * c[3] + t * 4.0 * c[4]))
+    }
+    pub fn acc(&self, t: f64) -> f64 {
+        let c = &self.c;
+        2.0 * c[2] + t * (6.0 * c[3] + t * 12.0 * c[4])
+    }
+    pub fn jerk(&self, t: f64) -> f64 {
+        6.0 * self.c[3] + 24.0 * self.c[4] * t
+    }
+}
+
+/// l(t) = b₀ + b₁t + … + b₅t⁵ (eq. 18).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Quintic {
+    pub c: [f64; 6],
+}
+
+impl Quintic {
+    /// Fits l, l̇, l̈ at 0 (eq. 21) and at T (eq. 22).
+    pub fn fit(l0: f64, v0: f64, a0: f64, lt: f64, vt: f64, at: f64, t: f64) -> Self {
+        let d0 = lt - (l0 + v0 * t + 0.5 * a0 * t * t);
+        let d1 = vt - (v0 + a0 * t);
+        let d2 = at - a0;
+        let t2 = t * t;
+        let t3 = t2 * t;
+        Quintic {
+            c: [
+                l0,
+                v0,
+                0.5 * a0,
+                (10.0 * d0 - 4.0 * d1 * t + 0.5 * d2 * t2) / t3,
+                (-15.0 * d0 + 7.0 * d1 * t - d2 * t2) / (t3 * t),
+                (6.0 * d0 - 3.0 * d1 * t + 0.5 * d2 * t2) / (t3 * t2),
+            ],
+        }
+    }
+    pub fn pos(&self, t: f64) -> f64 {
+        let c = &self.c;
+        c[0] + t * (c[1] + t * (c[2] + t * (c[3] + t * (c[4] + t * c[5]))))
+    }
+    pub fn vel(&self, t: f64) -> f64 {
+        let c = &self.c;
+        c[1] + t * (2.0 * c[2] + t * (3.0 * c[3] + t * (4.0 * c[4] + t * 5.0 * c[5])))
+    }
+    pub fn acc(&self, t: f64) -> f64 {
+        let c = &self.c;
+        2.0 * c[2] + t * (6.0 * c[3] + t * (12.0 * c[4] + t * 20.0 * c[5]))
+    }
+    pub fn jerk(&self, t: f64) -> f64 {
+        let c = &self.c;
+        6.0 * c[3] + t * (24.0 * c[4] + t * 60.0 * c[5])
+    }
+}
+
+/// Roots of a·t² + b·t + c = 0 strictly inside (0, T), ascending.
+fn roots_in(a: f64, b: f64, c: f64, t_end: f64) -> ([f64; 2], usize) {
+    let mut out = [0.0; 2];
+    let mut n = 0;
+    let mut push = |r: f64| {
+        if r > 0.0 && r < t_end {
+            out[n] = r;
+            n += 1;
+        }
+    };
+    if fabs(a) < 1e-12 {
+        if fabs(b) > 1e-12 {
+            push(-c / b);
+        }
+    } else {
+        let disc = b * b - 4.0 * a * c;
+        if disc >= 0.0 {
+            let sq = sqrt(disc);
+            let (r1, r2) = ((-b - sq) / (2.0 * a), (-b + sq) / (2.0 * a));
+            let (lo, hi) = if r1 <= r2 { (r1, r2) } else { (r2, r1) };
+            push(lo);
+            push(hi);
+        }
+    }
+    (out, n)
+}
+
+/// The ego's Frenet state at t = 0.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrenetState {
+    pub s: f64,
+    pub ds: f64,
+    pub dds: f64,
+    pub l: f64,
+    pub dl: f64,
+    pub ddl: f64,
+}
+
+/// Boxes in (s, l) that the ego's reference point may not enter, per time step.
+#[derive(Clone, Copy, Debug)]
+pub struct Occupancy {
+    s_lo: [[f64; MAX_BOXES]; MAX_STEPS],
+    s_hi: [[f64; MAX_BOXES]; MAX_STEPS],
+    l_lo: [[f64; MAX_BOXES]; MAX_STEPS],
+    l_hi: [[f64; MAX_BOXES]; MAX_STEPS],
+    n: [u8; MAX_STEPS],
+    /// Union s-interval of the step's boxes, for whole-step rejection.
+    step_lo: [f64; MAX_STEPS],
+    step_hi: [f64; MAX_STEPS],
+    steps: usize,
+}
+
+impl Default for Occupancy {
+    fn default() -> Self {
+        Occupancy {
+            s_lo: [[0.0; MAX_BOXES]; MAX_STEPS],
+            s_hi: [[0.0; MAX_BOXES]; MAX_STEPS],
+            l_lo: [[0.0; MAX_BOXES]; MAX_STEPS],
+            l_hi: [[0.0; MAX_BOXES]; MAX_STEPS],
+            n: [0; MAX_STEPS],
+            step_lo: [f64::INFINITY; MAX_STEPS],
+            step_hi: [f64::NEG_INFINITY; MAX_STEPS],
+            steps: 0,
+        }
+    }
+}
+
+impl Occupancy {
+    fn clear(&mut self, steps: usize) {
+        self.steps = steps;
+        self.n[..steps].fill(0);
+        self.step_lo[..steps].fill(f64::INFINITY);
+        self.step_hi[..steps].fill(f64::NEG_INFINITY);
+    }
+
+    /// Adds a box at `step`; when the step is full, it is merged into the box nearest in s.
+    fn add(&mut self, step: usize, s_lo: f64, s_hi: f64, l_lo: f64, l_hi: f64) {
+        let k = self.n[step] as usize;
+        if k < MAX_BOXES {
+            self.s_lo[step][k] = s_lo;
+            self.s_hi[step][k] = s_hi;
+            self.l_lo[step][k] = l_lo;
+            self.l_hi[step][k] = l_hi;
+            self.n[step] += 1;
+        } else {
+            let mid = 0.5 * (s_lo + s_hi);
+            let mut best = 0;
+            let mut best_d = f64::INFINITY;
+            for b in 0..MAX_BOXES {
+                let d = fabs(0.5 * (self.s_lo[step][b] + self.s_hi[step][b]) - mid);
+                if d < best_d {
+                    best_d = d;
+                    best = b;
+                }
+            }
+            self.s_lo[step][best] = self.s_lo[step][best].min(s_lo);
+            self.s_hi[step][best] = self.s_hi[step][best].max(s_hi);
+            self.l_lo[step][best] = self.l_lo[step][best].min(l_lo);
+            self.l_hi[step][best] = self.l_hi[step][best].max(l_hi);
+        }
+        self.step_lo[step] = self.step_lo[step].min(s_lo);
+        self.step_hi[step] = self.step_hi[step].max(s_hi);
+    }
+
+    /// True when `s` lies in the union s-interval of the boxes of `step`.
+    #[inline(always)]
+    pub fn may_hit(&self, step: usize, s: f64) -> bool {
+        s >= self.step_lo[step] && s <= self.step_hi[step]
+    }
+
+    /// True when (s, l) lies in a box of `step`.
+    #[inline(always)]
+    pub fn hits(&self, step: usize, s: f64, l: f64) -> bool {
+        if !self.may_hit(step, s) {
+            return false;
+        }
+        for b in 0..self.n[step] as usize {
+            if s >= self.s_lo[step][b]
+                && s <= self.s_hi[step][b]
+                && l >= self.l_lo[step][b]
+                && l <= self.l_hi[step][b]
+            {
+                return true;
+            }
+        }
+        false
+    }
+
+    /// Boxes at `step`, as (s_lo, s_hi, l_lo, l_hi).
+    pub fn boxes(&self, step: usize) -> impl Iterator<Item = (f64, f64, f64, f64)> + '_ {
+        (0..self.n[step] as usize).map(move |b| {
+            (
+                self.s_lo[step][b],
+                self.s_hi[step][b],
+                self.l_lo[step][b],
+                self.l_hi[step][b],
+            )
+        })
+    }
+}
+
+/// Predicted pose of an agent `t` s ahead: along its matched lane when it has one, otherwise
+/// straight along its direction of travel; constant acceleration, never reversing, speed at
+/// most `v_max`. Returns (position, heading) and updates the lane-segment `hint`.
+pub fn predict(
+    agent: &AgentState,
+    process: &ProcessState,
+    morph: &Morphology,
+    t: f64,
+    v_max: f64,
+    hint: &mut usize,
+) -> (Vec2, f64) {
+    let v = agent.speed();
+    let a = agent.longitudinal_accel();
+    let v_top = v_max.max(v);
+    let dist = travel(v, a, t, v_top);
+    match process.lane {
+        Some(lane_id) => {
+            let lane = morph.lane(lane_id);
+            let (p, tangent, seg) = lane.to_cartesian(process.s_m + dist, process.l_m, *hint);
+            *hint = seg;
+            (p, tangent)
+        }
+        None => {
+            let dir = agent.direction();
+            (agent.pos.plus(dir.scale(dist)), libm::atan2(dir.y, dir.x))
+        }
+    }
+}
+
+/// Distance covered in `t` s from speed `v` at constant acceleration `a`, stopping at 0 and
+/// saturating at `v_top`.
+pub fn travel(v: f64, a: f64, t: f64, v_top: f64) -> f64 {
+    if a < 0.0 {
+        let t_stop = v / -a;
+        let tt = t.min(t_stop);
+        v * tt + 0.5 * a * tt * tt
+    } else if a > 0.0 {
+        let t_top = ((v_top - v) / a).max(0.0);
+        let tt = t.min(t_top);
+        v * tt + 0.5 * a * tt * tt + (t - tt) * (v + a * tt)
+    } else {
+        v * t
+    }
+}
+
+/// One point of the output trajectory.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TrajectoryPoint {
+    /// Time from the cycle start, s.
+    pub t: f64,
+    /// Frenet s, l on the ego's lane, m.
+    pub s: f64,
+    pub l: f64,
+    /// Cartesian position, m.
+    pub x: f64,
+    pub y: f64,
+    /// Heading, rad.
+    pub heading: f64,
+    /// Speed along the lane, m/s.
+    pub speed: f64,
+    /// Longitudinal acceleration, m/s².
+    pub accel: f64,
+}
+
+/// A planned trajectory.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Trajectory {
+    pub points: [TrajectoryPoint; MAX_POINTS],
+    pub n: usize,
+}
+
+impl Default for Trajectory {
+    fn default() -> Self {
+        Trajectory {
+            points: [TrajectoryPoint::default(); MAX_POINTS],
+            n: 0,
+        }
+    }
+}
+
+impl Trajectory {
+    pub fn points(&self) -> &[TrajectoryPoint] {
+        &self.points[..self.n]
+    }
+
+    /// The state `t` s after the start, interpolated linearly between points (heading along
+    /// the shorter arc); held at the last point beyond the end. `None` when empty.
+    pub fn sample(&self, t: f64) -> Option<TrajectoryPoint> {
+        let pts = self.points();
+        let first = *pts.first()?;
+        if t <= first.t || t.is_nan() {
+            return Some(first);
+        }
+        let Some(k) = pts.iter().position(|q| q.t >= t) else {
+            return pts.last().copied();
+        };
+        let (a, b) = (pts[k - 1], pts[k]);
+        let u = (t - a.t) / (b.t - a.t);
+        let lerp = |x: f64, y: f64| x + (y - x) * u;
+        let turn = libm::remainder(b.heading - a.heading, core::f64::consts::TAU);
+        Some(TrajectoryPoint {
+            t,
+            s: lerp(a.s, b.s),
+            l: lerp(a.l, b.l),
+            x: lerp(a.x, b.x),
+            y: lerp(a.y, b.y),
+            heading: a.heading + turn * u,
+            speed: lerp(a.speed, b.speed),
+            accel: lerp(a.accel, b.accel),
+        })
+    }
+}
+
+/// Result of one planning run.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PlanStats {
+    /// Candidates evaluated.
+    pub evaluated: u16,
+    /// Candidates that passed limits and collision checks.
+    pub feasible: u16,
+    /// Rejected by speed, acceleration, jerk or curvature limits.
+    pub limit_rejects: u16,
+    /// Rejected by collision.
+    pub collision_rejects: u16,
+    /// S_k of the best candidate (∞ when none).
+    pub best_score: f64,
+}
+
+/// The best candidate of a run.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Candidate {
+    pub s: Quartic,
+    pub l: Quintic,
+    /// Polynomial duration T, s.
+    pub duration: f64,
+    pub score: f64,
+}
+
+/// Per-cycle planning context plus the scratch of the Monte Carlo run.
+#[derive(Clone, Copy, Debug)]
+pub struct Planner {
+    /// The ego's start state.
+    pub start: FrenetState,
+    /// Occupancy from predicted agents.
+    pub occupancy: Occupancy,
+    /// Curvature speed caps over [s₀, s₀ + reach], m/s.
+    vcap: [f64; VCAP_BINS],
+    vcap_inv_bin: f64,
+    /// Largest reference curvature over the reach, 1/m.
+    kappa_max_ahead: f64,
+    /// Lowest curvature speed cap over the reach, m/s.
+    vcap_min: f64,
+    /// Where the first cap below the speed limit begins, m (∞ when none).
+    vcap_from_s: f64,
+    /// Distance whose traversal time is T_n of S_k, m.
+    pub goal_distance: f64,
+    steps: usize,
+    dt: f64,
+    // Monte Carlo terminal states, structure of arrays.
+    end_t: [f64; MAX_SAMPLES],
+    end_v: [f64; MAX_SAMPLES],
+    end_l: [f64; MAX_SAMPLES],
+}
+
+impl Default for Planner {
+    fn default() -> Self {
+        Planner {
+            start: FrenetState::default(),
+            occupancy: Occupancy::default(),
+            vcap: [0.0; VCAP_BINS],
+            vcap_inv_bin: 1.0,
+            kappa_max_ahead: 0.0,
+            vcap_min: 0.0,
+            vcap_from_s: f64::INFINITY,
+            goal_distance: 50.0,
+            steps: 0,
+            dt: 0.1,
+            end_t: [0.0; MAX_SAMPLES],
+            end_v: [0.0; MAX_SAMPLES],
+            end_l: [0.0; MAX_SAMPLES],
+        }
+    }
+}
+
+impl Planner {
+    /// Prepares a cycle: start state, curvature caps and the occupancy of `agents` (all valid
+    /// agents, with their process states). Agents following the ego in its lane are left to
+    /// keep their own distance.
+    #[allow(clippy::too_many_arguments)]
+    pub fn prepare(
+        &mut self,
+        lane: &Lane,
+        start: FrenetState,
+        goal_distance: f64,
+        agents: &[AgentState],
+        processes: &[ProcessState; MAX_AGENTS],
+        morph: &Morphology,
+        p: &TrajectoryParams,
+    ) {
+        self.start = start;
+        self.dt = p.dt_s;
+        self.steps = ((p.horizon_s / p.dt_s + 1e-9) as usize).clamp(1, MAX_STEPS);
+        self.goal_distance = goal_distance.max(1.0);
+        let reach = p.max_speed_mps.max(start.ds) * self.steps as f64 * p.dt_s + 1.0;
+        self.fill_vcap(lane, start.s, reach, p);
+        self.fill_occupancy(lane, agents, processes, morph, reach, p);
+    }
+
+    fn fill_vcap(&mut self, lane: &Lane, s0: f64, reach: f64, p: &TrajectoryParams) {
+        let bin = reach / VCAP_BINS as f64;
+        self.vcap_inv_bin = 1.0 / bin;
+        self.kappa_max_ahead = 0.0;
+        self.vcap_min = f64::INFINITY;
+        self.vcap_from_s = f64::INFINITY;
+        let mut seg = lane.segment_at(s0, 0);
+        for b in 0..VCAP_BINS {
+            let (lo, hi) = (s0 + b as f64 * bin, s0 + (b + 1) as f64 * bin);
+            seg = lane.segment_at(lo, seg);
+            let mut kappa = lane.curvature_at(lo, seg);
+            let mut k = seg;
+            while k + 1 < lane.segments() && lane.s_at_vertex(k + 1) < hi {
+                k += 1;
+                kappa = kappa.max(lane.curvature_at(lane.s_at_vertex(k), k));
+            }
+            self.kappa_max_ahead = self.kappa_max_ahead.max(kappa);
+            self.vcap[b] = if kappa > p.max_curvature {
+                0.0
+            } else if kappa > 1e-9 {
+                sqrt(p.max_lateral_accel_mps2 / kappa).min(p.max_speed_mps)
+            } else {
+                p.max_speed_mps
+            };
+            self.vcap_min = self.vcap_min.min(self.vcap[b]);
+            if self.vcap[b] < p.max_speed_mps && self.vcap_from_s.is_infinite() {
+                self.vcap_from_s = lo;
+            }
+        }
+    }
+
+    fn fill_occupancy(
+        &mut self,
+        lane: &Lane,
+        agents: &[AgentState],
+        processes: &[ProcessState; MAX_AGENTS],
+        morph: &Morphology,
+        reach: f64,
+        p: &TrajectoryParams,
+    ) {
+        let s0 = self.start.s;
+        self.occupancy.clear(self.steps);
+        let half_l = 0.5 * p.vehicle_length_m;
+        let half_w = 0.5 * p.vehicle_width_m;
+        // Window of the ego's lane that any candidate can reach, and its bounding box.
+        let first = lane.segment_at(s0 - p.vehicle_length_m, 0);
+        let last = lane.segment_at(s0 + reach + p.vehicle_length_m, first) + 1;
+        let inflate = lane.half_width
+            + p.max_lateral_offset_m
+            + p.vehicle_length_m
+            + p.safety_margin_m
+            + p.margin_growth_mps * self.steps as f64 * self.dt;
+        let (mut min, mut max) = (
+            Vec2::new(f64::INFINITY, f64::INFINITY),
+            Vec2::new(f64::NEG_INFINITY, f64::NEG_INFINITY),
+        );
+        // Vertices of the window, plus its ends, which may be extrapolated past the lane's.
+        let ends = [
+            lane.pose_at(s0 - p.vehicle_length_m, first).0,
+            lane.pose_at(s0 + reach + p.vehicle_length_m, first).0,
+        ];
+        for q in lane.points()[first..=last.min(lane.segments())]
+            .iter()
+            .chain(&ends)
+        {
+            min = Vec2::new(min.x.min(q.x), min.y.min(q.y));
+            max = Vec2::new(max.x.max(q.x), max.y.max(q.y));
+        }
+        let (min, max) = (
+            Vec2::new(min.x - inflate, min.y - inflate),
+            Vec2::new(max.x + inflate, max.y + inflate),
+        );
+        let lateral_reach = lane.half_width + p.max_lateral_offset_m;
+
+        for (j, agent) in agents.iter().enumerate() {
+            let here = lane.project_range(agent.pos, first, last);
+            let heading_along = Vec2::from_angle(here.tangent).dot(agent.direction()) > 0.5;
+            if here.s < s0 && fabs(here.l) < lane.half_width && heading_along {
+                continue; // a follower in the ego's lane
+            }
+            let mut hint = processes[j]
+                .lane
+                .map(|l| morph.lane(l).segment_at(processes[j].s_m, 0))
+                .unwrap_or(0);
+            // Predictions move at most a few segments per step: after the first global
+            // projection, search only segments near the previous foot point.
+            let mut near: Option<usize> = None;
+            for step in 0..self.steps {
+                let t = (step + 1) as f64 * self.dt;
+                let (pos, heading) =
+                    predict(agent, &processes[j], morph, t, p.max_speed_mps, &mut hint);
+                if pos.x < min.x || pos.x > max.x || pos.y < min.y || pos.y > max.y {
+                    near = None;
+                    continue;
+                }
+                let f = match near {
+                    Some(k) => {
+                        lane.project_range(pos, k.saturating_sub(4).max(first), (k + 6).min(last))
+                    }
+                    None => lane.project_range(pos, first, last),
+                };
+                near = Some(f.segment);
+                let rel = heading - f.tangent;
+                let (c, s) = (fabs(cos(rel)), fabs(sin(rel)));
+                let margin = p.safety_margin_m + p.margin_growth_mps * t;
+                let ext_s = half_l + c * half_l + s * half_w + margin;
+                let ext_l = half_w + s * half_l + c * half_w + margin;
+                if fabs(f.l) > lateral_reach + ext_l {
+                    continue;
+                }
+                self.occupancy
+                    .add(step, f.s - ext_s, f.s + ext_s, f.l - ext_l, f.l + ext_l);
+            }
+        }
+    }
+
+    /// Draws `n` terminal states around `nominal` (eq. 23): T and v_T are scaled by
+    /// (1 + σ·z), l_T = σ_l·z (its nominal is 0), z ~ 𝒩(0, 1) clipped to ±`sigma_clip`.
+    /// Sample 0 is the nominal itself.
+    pub fn sample(&mut self, nominal: &Profile, n: usize, cycle: u64, p: &TrajectoryParams) {
+        let n = n.clamp(1, MAX_SAMPLES);
+        let mut rng = SmallRng::seed_from_u64(p.seed ^ cycle.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let clip = p.sigma_clip;
+        let mut z = || -> f64 {
+            let v: f64 = rng.sample(StandardNormal);
+            v.clamp(-clip, clip)
+        };
+        let v_top = p.max_speed_mps.max(self.start.ds);
+        let low_speed = self.start.ds < p.low_speed_mps;
+        for k in 0..n {
+            let (zt, zv, zl) = if k == 0 {
+                (0.0, 0.0, 0.0)
+            } else {
+                (z(), z(), z())
+            };
+            self.end_t[k] = (nominal.duration * (1.0 + p.sigma_rel * zt))
+                .clamp(p.min_duration_s, p.max_duration_s);
+            self.end_v[k] = (nominal.target_speed * (1.0 + p.sigma_rel * zv)).clamp(0.0, v_top);
+            // Below the low-speed threshold, at either end, the offset is held: a time-based
+            // lateral polynomial would need unbounded path curvature near standstill.
+            self.end_l[k] = if low_speed || self.end_v[k] < p.low_speed_mps {
+                self.start.l
+            } else {
+                (p.sigma_lateral_m * zl).clamp(-p.max_lateral_offset_m, p.max_lateral_offset_m)
+            };
+        }
+    }
+
+    /// Evaluates the first `n` sampled candidates (Table 2) and returns the best feasible one.
+    pub fn run(&self, n: usize, p: &TrajectoryParams, stats: &mut PlanStats) -> Option<Candidate> {
+        let n = n.clamp(1, MAX_SAMPLES);
+        *stats = PlanStats {
+            best_score: f64::INFINITY,
+            ..PlanStats::default()
+        };
+        let mut best: Option<Candidate> = None;
+        for k in 0..n {
+            stats.evaluated += 1;
+            match self.evaluate(self.end_t[k], self.end_v[k], self.end_l[k], p) {
+                Ok(c) => {
+                    stats.feasible += 1;
+                    if c.score < stats.best_score {
+                        stats.best_score = c.score;
+                        best = Some(c);
+                    }
+                }
+                Err(Reject::Limits) => stats.limit_rejects += 1,
+                Err(Reject::Collision) => stats.collision_rejects += 1,
+            }
+        }
+        best
+    }
+
+    /// Evaluates one candidate with terminal time `t_end`, speed `v_end` and offset `l_end`.
+    pub fn evaluate(
+        &self,
+        t_end: f64,
+        v_end: f64,
+        l_end: f64,
+        p: &TrajectoryParams,
+    ) -> Result<Candidate, Reject> {
+        let st = &self.start;
+        let q = Quartic::fit(st.s, st.ds, st.dds, v_end, 0.0, t_end);
+        let l = if l_end == st.l && (st.ds < p.low_speed_mps || v_end < p.low_speed_mps) {
+            Quintic {
+                c: [st.l, 0.0, 0.0, 0.0, 0.0, 0.0],
+            }
+        } else {
+            Quintic::fit(st.l, st.dl, st.ddl, l_end, 0.0, 0.0, t_end)
+        };
+        let (jerk_s, jerk_l, v_peak) = self.check_limits(&q, &l, t_end, p)?;
+
+        // Time grid: collisions, curvature speed caps (only when the candidate's peak speed
+        // exceeds the lowest cap ahead) and the time to the goal distance. The lateral offset
+        // is evaluated only where a box could be hit.
+        let check_caps = v_peak > self.vcap_min + 1e-6;
+        let goal = st.s + self.goal_distance;
+        let mut t_goal = f64::NAN;
+        let (mut prev_t, mut prev_s) = (0.0, st.s);
+        let s_end = q.pos(t_end);
+        for step in 0..self.steps {
+            let t = (step + 1) as f64 * self.dt;
+            let on_poly = t <= t_end;
+            let s = if on_poly {
+                q.pos(t)
+            } else {
+                s_end + v_end * (t - t_end)
+            };
+            if check_caps && s >= self.vcap_from_s {
+                let ds = if on_poly { q.vel(t) } else { v_end };
+                let bin = ((s - st.s) * self.vcap_inv_bin) as usize;
+                // A cap the ego cannot meet even braking at the limit is relaxed to that
+                // braking curve, so an ego that is too fast for a curve brakes instead of
+                // having no plan.
+                if ds > self.vcap[bin.min(VCAP_BINS - 1)] + 1e-6
+                    && ds * ds > st.ds * st.ds - 2.0 * p.max_brake_mps2 * (s - st.s) + 1e-6
+                {
+                    return Err(Reject::Limits);
+                }
+            }
+            if self.occupancy.may_hit(step, s) {
+                let lat = if on_poly { l.pos(t) } else { l_end };
+                if self.occupancy.hits(step, s, lat) {
+                    return Err(Reject::Collision);
+                }
+            }
+            if t_goal.is_nan() && s >= goal {
+                t_goal = prev_t + (goal - prev_s) / (s - prev_s).max(1e-9) * (t - prev_t);
+            }
+            prev_t = t;
+            prev_s = s;
+        }
+        let horizon = self.steps as f64 * self.dt;
+        let t_n = if t_goal.is_nan() {
+            let v_last = if horizon <= t_end {
+                q.vel(horizon)
+            } else {
+                v_end
+            };
+            (horizon + (goal - prev_s) / v_last.max(0.5)).min(3.0 * p.t_ref_s)
+        } else {
+            t_goal
+        };
+        let score = p.c_efficiency * t_n / p.t_ref_s
+            + p.c_smoothness * (jerk_s + jerk_l) / p.j_max_norm
+            + p.c_lateral * fabs(l_end) / p.max_lateral_offset_m;
+        Ok(Candidate {
+            s: q,
+            l,
+            duration: t_end,
+            score,
+        })
+    }
+
+    /// Analytic limit checks over [0, T]; returns ∫|s⃛| dt, ∫|l⃛| dt and the peak speed.
+    fn check_limits(
+        &self,
+        q: &Quartic,
+        l: &Quintic,
+        t_end: f64,
+        p: &TrajectoryParams,
+    ) -> Result<(f64, f64, f64), Reject> {
+        let v_top = p.max_speed_mps.max(self.start.ds) + 1e-6;
+        let a_top = p.max_accel_mps2.max(self.start.dds) + 1e-6;
+        let b_top = p.max_brake_mps2.max(-self.start.dds) + 1e-6;
+        let j_top = p.max_jerk_mps3 + 1e-6;
+        // Longitudinal jerk is linear: extremes at the ends.
+        if fabs(q.jerk(0.0)).max(fabs(q.jerk(t_end))) > j_top {
+            return Err(Reject::Limits);
+        }
+        // Acceleration is quadratic: ends and vertex (where the jerk vanishes).
+        let (a0, a_t) = (q.acc(0.0), q.acc(t_end));
+        let (mut a_min, mut a_max) = (a0.min(a_t), a0.max(a_t));
+        let mut jerk_s = fabs(a_t - a0);
+        let (jr, jn) = roots_in(0.0, 24.0 * q.c[4], 6.0 * q.c[3], t_end);
+        if jn == 1 {
+            let a_v = q.acc(jr[0]);
+            a_min = a_min.min(a_v);
+            a_max = a_max.max(a_v);
+            jerk_s = fabs(a_v - a0) + fabs(a_t - a_v);
+        }
+        if a_max > a_top || -a_min > b_top {
+            return Err(Reject::Limits);
+        }
+        // Speed is cubic: ends and the roots of the acceleration.
+        let (mut v_min, mut v_max) = (q.vel(0.0).min(q.vel(t_end)), q.vel(0.0).max(q.vel(t_end)));
+        let (vr, vn) = roots_in(12.0 * q.c[4], 6.0 * q.c[3], 2.0 * q.c[2], t_end);
+        for &r in &vr[..vn] {
+            let v = q.vel(r);
+            v_min = v_min.min(v);
+            v_max = v_max.max(v);
+        }
+        if v_max > v_top || v_min < -0.05 {
+            return Err(Reject::Limits);
+        }
+        // Lateral jerk is quadratic: ends and vertex; lateral acceleration is cubic: ends and
+        // the roots of the jerk. ∫|l⃛| is the total variation of l̈ between those roots.
+        let (c3, c4, c5) = (l.c[3], l.c[4], l.c[5]);
+        let mut lj_max = fabs(l.jerk(0.0)).max(fabs(l.jerk(t_end)));
+        if fabs(c5) > 1e-12 {
+            let tv = -24.0 * c4 / (120.0 * c5);
+            if tv > 0.0 && tv < t_end {
+                lj_max = lj_max.max(fabs(l.jerk(tv)));
+            }
+        }
+        if lj_max > j_top {
+            return Err(Reject::Limits);
+        }
+        let (lr, ln) = roots_in(60.0 * c5, 24.0 * c4, 6.0 * c3, t_end);
+        let mut prev = l.acc(0.0);
+        let mut la_max = fabs(prev);
+        let mut jerk_l = 0.0;
+        for &r in lr[..ln].iter().chain(core::iter::once(&t_end)) {
+            let a = l.acc(r);
+            la_max = la_max.max(fabs(a));
+            jerk_l += fabs(a - prev);
+            prev = a;
+        }
+        if la_max > p.max_lateral_accel_mps2 + 1e-6 {
+            return Err(Reject::Limits);
+        }
+        // Curvature bound: reference curvature plus the curvature of the lateral motion,
+        // |l̈| / ṡ², with ṡ floored at 1 m/s.
+        if la_max > 1e-3
+            && self.kappa_max_ahead + la_max / (v_min.max(1.0) * v_min.max(1.0)) > p.max_curvature
+        {
+            return Err(Reject::Limits);
+        }
+        Ok((jerk_s, jerk_l, v_max))
+    }
+
+    /// Samples the chosen candidate into Cartesian points on `lane`.
+    pub fn render(&self, c: &Candidate, lane: &Lane, out: &mut Trajectory) {
+        let mut hint = lane.segment_at(self.start.s, 0);
+        out.n = self.steps + 1;
+        let (s_end, l_end) = (c.s.pos(c.duration), c.l.pos(c.duration));
+        let v_end = c.s.vel(c.duration);
+        for i in 0..out.n {
+            let t = i as f64 * self.dt;
+            let (s, ds, dds, lat, dl) = if t <= c.duration {
+                (c.s.pos(t), c.s.vel(t), c.s.acc(t), c.l.pos(t), c.l.vel(t))
+            } else {
+                (s_end + v_end * (t - c.duration), v_end, 0.0, l_end, 0.0)
+            };
+            let (pos, tangent, seg) = lane.to_cartesian(s, lat, hint);
+            hint = seg;
+            out.points[i] = TrajectoryPoint {
+                t,
+                s,
+                l: lat,
+                x: pos.x,
+                y: pos.y,
+                heading: tangent + libm::atan2(dl, ds.max(0.1)),
+                speed: ds,
+                accel: dds,
+            };
+        }
+    }
+
+    /// Minimum-risk fallback: brake along the lane at constant deceleration, enough to stop
+    /// `stop_distance` m ahead (before the conflict zone) but at least `max_brake` and at most
+    /// `emergency_brake`; with nothing to stop for, brake at `max_brake`.
+    pub fn minimum_risk(
+        &self,
+        stop_distance: f64,
+        lane: &Lane,
+        p: &TrajectoryParams,
+        out: &mut Trajectory,
+    ) {
+        let v0 = self.start.ds.max(0.0);
+        let need = if stop_distance.is_finite() && stop_distance > 0.0 {
+            v0 * v0 / (2.0 * stop_distance)
+        } else {
+            f64::INFINITY
+        };
+        let decel = need.clamp(p.max_brake_mps2, p.emergency_brake_mps2);
+        let t_stop = v0 / decel;
+        let mut hint = lane.segment_at(self.start.s, 0);
+        out.n = self.steps + 1;
+        for i in 0..out.n {
+            let t = i as f64 * self.dt;
+            let tt = t.min(t_stop);
+            let s = self.start.s + v0 * tt - 0.5 * decel * tt * tt;
+            let (pos, tangent, seg) = lane.to_cartesian(s, self.start.l, hint);
+            hint = seg;
+            out.points[i] = TrajectoryPoint {
+                t,
+                s,
+                l: self.start.l,
+                x: pos.x,
+                y: pos.y,
+                heading: tangent,
+                speed: v0 - decel * tt,
+                accel: if t < t_stop { -decel } else { 0.0 },
+            };
+        }
+    }
+}
+
+/// Why a candidate failed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reject {
+    Limits,
+    Collision,
+}

@@ -1,0 +1,335 @@
+//! Each equation of the method against hand-computed values.
+mod common;
+
+use common::*;
+use concord_core::advice::{gate, Advice, AdviceVerdict, RequestLog};
+use concord_core::choice::{argmax, correct, cosine, idm_accel, ChoiceHistory, Maneuver, Profile};
+use concord_core::opm::{delta_ttc, guarded_ttc};
+use concord_core::params::{AdviceParams, ChoiceParams, OpmParams, Params};
+use concord_core::saliency::{attend, softmax, Saliency, FEATURES};
+use concord_core::scene::{paper, BuiltIn, Morphology, ProcessState, Turn, Vec2};
+use concord_core::trajectory::{Quartic, Quintic};
+
+const EPS: f64 = 1e-9;
+
+#[test]
+fn eq2_paper_geometry_has_the_conflict_point_at_minus_five_minus_five() {
+    let m = Morphology::built_in(BuiltIn::PaperIntersection);
+    let (s_cav, s_hdv) = m
+        .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
+        .expect("the routes cross");
+    // CAV: 35 m straight, then a quarter circle of radius 10 m sampled as 16 chords.
+    let chord = 2.0 * 10.0 * (std::f64::consts::FRAC_PI_2 / 32.0).sin();
+    assert!(
+        (s_cav - (35.0 + 16.0 * chord)).abs() < 1e-6,
+        "s on CAV lane {s_cav}"
+    );
+    assert!((s_hdv - 35.0).abs() < 1e-6, "s on HDV lane {s_hdv}");
+    // Lanes of one approach diverge, so they do not conflict.
+    assert!(m
+        .conflict_between(paper::CAV_LEFT, paper::WEST_STRAIGHT)
+        .is_none());
+}
+
+#[test]
+fn eq3_process_state_of_the_hdv() {
+    let m = Morphology::built_in(BuiltIn::PaperIntersection);
+    let hdv = vehicle(1, Vec2::new(-40.0, -5.0), 0.0, 8.0);
+    let p = ProcessState::of(&hdv, &m, 1.0);
+    assert_eq!(p.lane, Some(paper::HDV_STRAIGHT));
+    assert!((p.dist_to_stop_m - 30.0).abs() < EPS);
+    assert!((p.speed_mps - 8.0).abs() < EPS);
+    assert!(p.theta_v.abs() < EPS && p.l_m.abs() < EPS);
+    // A vehicle heading the wrong way matches no lane of its position.
+    let wrong = vehicle(2, Vec2::new(-40.0, -5.0), std::f64::consts::PI, 8.0);
+    assert_eq!(ProcessState::of(&wrong, &m, 1.0).lane, None);
+}
+
+#[test]
+fn frenet_projection_round_trips_on_the_turn() {
+    let m = Morphology::built_in(BuiltIn::PaperIntersection);
+    let lane = m.lane(paper::CAV_LEFT);
+    for s in [5.0, 36.0, 42.0, 49.0, 60.0] {
+        for l in [-1.0, 0.0, 1.5] {
+            let (p, _, _) = lane.to_cartesian(s, l, 0);
+            let f = lane.project(p);
+            // Exact on the centre line; off it, the polyline's piecewise frames differ by the
+            // chord turn angle (1/10 rad on this arc) at vertices.
+            let tol = 1e-6 + l.abs() * 0.1;
+            assert!(
+                (f.s - s).abs() < tol && (f.l - l).abs() < tol,
+                "({s}, {l}) -> ({}, {})",
+                f.s,
+                f.l
+            );
+        }
+    }
+}
+
+#[test]
+fn eq4_delta_ttc_with_its_standstill_guard() {
+    let p = OpmParams::default();
+    assert!((delta_ttc(30.0, 10.0, 20.0, 5.0, &p) - 1.0).abs() < EPS);
+    // v below the floor uses the floor: 10 m / 0.5 m/s = 20 s.
+    assert!((guarded_ttc(10.0, 0.0, &p) - 20.0).abs() < EPS);
+    // Capped at ttc_max, and never negative.
+    assert_eq!(guarded_ttc(1000.0, 0.0, &p), p.ttc_max_s);
+    assert_eq!(guarded_ttc(-5.0, 3.0, &p), 0.0);
+}
+
+#[test]
+fn eq4_to_6_paper_scene_selects_the_hdv_as_a_risky_conflict() {
+    let mut core = paper_core(Params::default());
+    let d = core.step(&paper_scene(0.0, 8.0, 8.0), 0.0, None).unwrap();
+    let t = core.triplet();
+    assert_eq!(t.n_objects, 1);
+    assert_eq!(t.n_conflicts, 1);
+    let c = t.conflicts[0];
+    let (s_cav, s_hdv) = core
+        .morphology()
+        .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
+        .unwrap();
+    assert!((c.ego_ttc_s - s_cav / 8.0).abs() < 1e-9);
+    assert!((c.agent_ttc_s - s_hdv / 8.0).abs() < 1e-9);
+    assert!((c.delta_ttc_s - (s_cav - s_hdv) / 8.0).abs() < 1e-9);
+    assert!(c.is_risky(&core.params().opm));
+    assert!(
+        (t.objects[0].saliency - 1.0).abs() < EPS,
+        "a single object takes all attention"
+    );
+    assert_eq!(d.cycle, 1);
+}
+
+#[test]
+fn eq7_attention_matches_a_hand_computed_softmax() {
+    let mut q = [[0.0; FEATURES]; 2];
+    q[0][0] = 1.0;
+    let mut key = [0.0; FEATURES];
+    key[0] = 2.0;
+    let mut out = Saliency::default();
+    attend(&q, &key, &mut out);
+    let z = 2.0 / (FEATURES as f64).sqrt();
+    let a0 = z.exp() / (z.exp() + 1.0);
+    assert!((out.weights[0] - a0).abs() < EPS);
+    assert!((out.weights[1] - (1.0 - a0)).abs() < EPS);
+    assert!(
+        (out.context[0] - a0).abs() < EPS,
+        "V = Q: the context is Σ αᵢ qᵢ"
+    );
+}
+
+#[test]
+fn eq9_and_11_utility_and_logit() {
+    let mut p = [0.0; 2];
+    softmax(&[0.0, 2f64.ln()], &mut p);
+    assert!((p[0] - 1.0 / 3.0).abs() < EPS && (p[1] - 2.0 / 3.0).abs() < EPS);
+    // Large utilities do not overflow.
+    softmax(&[1000.0, 1000.0], &mut p);
+    assert!((p[0] - 0.5).abs() < EPS);
+}
+
+#[test]
+fn eq12_and_14_corrected_utility() {
+    let p = ChoiceParams {
+        gamma: 0.5,
+        lambda: 0.25,
+        ..ChoiceParams::default()
+    };
+    let v = correct(
+        &[1.0; 5],
+        &[1.0, 0.0, 0.5, 0.0, 0.0],
+        Some(Maneuver::Accelerate),
+        &p,
+    );
+    assert_eq!(v, [1.5, 0.75, 1.0, 0.75, 0.75]);
+    // No previous maneuver: no switch penalty.
+    assert_eq!(correct(&[0.0; 5], &[0.0; 5], None, &p), [0.0; 5]);
+    assert_eq!(
+        argmax(&[0.1, 0.3, 0.3, 0.2, 0.1]),
+        Maneuver::Decelerate,
+        "ties go to the lower index"
+    );
+}
+
+#[test]
+fn eq13_history_consistency_is_the_max_cosine_over_matching_records() {
+    let mut h = ChoiceHistory::default();
+    h.record(0.0, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0], Maneuver::Accelerate);
+    h.record(0.1, [0.0, 1.0, 0.0, 0.0, 0.0, 0.0], Maneuver::Accelerate);
+    h.record(0.2, [0.0, 0.0, 1.0, 0.0, 0.0, 0.0], Maneuver::Decelerate);
+    h.record(0.25, [0.0, 0.0, 0.0, 1.0, 0.0, 0.0], Maneuver::TurnLeft); // < 0.1 s later: not stored
+    let d = h.d_prev(&[3.0, 1.0, 0.0, 0.0, 0.0, 0.0]);
+    assert!((d[0] - 3.0 / 10f64.sqrt()).abs() < EPS);
+    assert_eq!(d[1], 0.0);
+    assert_eq!(
+        d[3], 0.0,
+        "the 0.25 s record was within 0.1 s of the last one"
+    );
+    assert_eq!(
+        h.previous,
+        Some(Maneuver::TurnLeft),
+        "i_prev is the latest executed maneuver"
+    );
+    assert!(
+        (cosine(
+            &[1.0, 1.0, 0.0, 0.0, 0.0, 0.0],
+            &[-1.0, -1.0, 0.0, 0.0, 0.0, 0.0]
+        ) + 1.0)
+            .abs()
+            < EPS
+    );
+}
+
+#[test]
+fn idm_penalty_input_free_road_and_close_leader() {
+    let p = ChoiceParams::default();
+    // From rest with a far leader: about the maximum acceleration.
+    assert!((idm_accel(0.0, 1e6, 0.0, &p) - p.idm_max_accel_mps2).abs() < 1e-6);
+    // Fast and closing on a near leader: strong braking.
+    assert!(idm_accel(10.0, 5.0, 5.0, &p) < -5.0);
+}
+
+#[test]
+fn profile_arrival_times() {
+    let keep = Profile {
+        accel: 0.0,
+        target_speed: 10.0,
+        duration: 3.0,
+        yields: false,
+    };
+    assert!((keep.arrival_time(10.0, 50.0) - 5.0).abs() < EPS);
+    // Accelerate 2 m/s² from 0 to 4 m/s (2 s, 4 m), then 4 m/s: 12 m takes 2 + 8/4 = 4 s.
+    let acc = Profile {
+        accel: 2.0,
+        target_speed: 4.0,
+        duration: 3.0,
+        yields: false,
+    };
+    assert!((acc.arrival_time(0.0, 12.0) - 4.0).abs() < EPS);
+    // Braking 2 m/s² from 4 m/s stops after 4 m: 5 m is never reached.
+    let stop = Profile {
+        accel: -2.0,
+        target_speed: 0.0,
+        duration: 3.0,
+        yields: true,
+    };
+    assert!(stop.arrival_time(4.0, 5.0).is_infinite());
+}
+
+#[test]
+fn eq16_gate_checks_in_order() {
+    let p = AdviceParams::default();
+    let mut log = RequestLog::default();
+    for cycle in 1..=50 {
+        log.issue(cycle, cycle as f64 * 0.05);
+    }
+    let advice = |id, conf, at| Advice {
+        request_id: id,
+        maneuver: Maneuver::Accelerate,
+        confidence: conf,
+        received_at_s: at,
+    };
+    let safe = |_| true;
+    assert_eq!(
+        gate(None, &log, Turn::Left, &p, safe).1,
+        AdviceVerdict::NoAdvice
+    );
+    assert_eq!(
+        gate(Some(&advice(45, 0.9, 2.5)), &log, Turn::Left, &p, safe),
+        (Some(Maneuver::Accelerate), AdviceVerdict::Accepted)
+    );
+    assert_eq!(
+        gate(Some(&advice(5, 0.9, 2.5)), &log, Turn::Left, &p, safe).1,
+        AdviceVerdict::UnknownRequest,
+        "older than 40 cycles"
+    );
+    assert_eq!(
+        gate(Some(&advice(51, 0.9, 2.5)), &log, Turn::Left, &p, safe).1,
+        AdviceVerdict::UnknownRequest,
+        "not issued yet"
+    );
+    assert_eq!(
+        gate(Some(&advice(45, 0.69, 2.5)), &log, Turn::Left, &p, safe).1,
+        AdviceVerdict::LowConfidence
+    );
+    // Request 45 was issued at 2.25 s; its deadline is 3.75 s.
+    assert_eq!(
+        gate(Some(&advice(45, 0.9, 3.76)), &log, Turn::Left, &p, safe).1,
+        AdviceVerdict::Late
+    );
+    assert_eq!(
+        gate(Some(&advice(45, f64::NAN, 2.5)), &log, Turn::Left, &p, safe).1,
+        AdviceVerdict::Malformed
+    );
+    let right = Advice {
+        maneuver: Maneuver::TurnRight,
+        ..advice(45, 0.9, 2.5)
+    };
+    assert_eq!(
+        gate(Some(&right), &log, Turn::Left, &p, safe).1,
+        AdviceVerdict::NavigationInconsistent
+    );
+    assert_eq!(
+        gate(Some(&advice(45, 0.9, 2.5)), &log, Turn::Left, &p, |_| false),
+        (None, AdviceVerdict::Unsafe)
+    );
+}
+
+#[test]
+fn eq17_and_19_20_quartic_hand_solution() {
+    // s0 = v0 = a0 = 0, v_T = 1, a_T = 0, T = 1: s(t) = t³ − t⁴/2.
+    let q = Quartic::fit(0.0, 0.0, 0.0, 1.0, 0.0, 1.0);
+    assert!((q.c[3] - 1.0).abs() < EPS && (q.c[4] + 0.5).abs() < EPS);
+}
+
+#[test]
+fn eq18_and_21_22_quintic_hand_solution() {
+    // Rest to rest over a unit offset in unit time: 10t³ − 15t⁴ + 6t⁵.
+    let q = Quintic::fit(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0);
+    assert!(
+        (q.c[3] - 10.0).abs() < EPS && (q.c[4] + 15.0).abs() < EPS && (q.c[5] - 6.0).abs() < EPS
+    );
+}
+
+#[test]
+fn eq23_samples_are_bounded_and_seeded() {
+    let mut core = paper_core(Params::default());
+    let scene = paper_scene(0.0, 8.0, 8.0);
+    let a = core.step(&scene, 0.0, None).unwrap();
+    let mut again = paper_core(Params::default());
+    let b = again.step(&scene, 0.0, None).unwrap();
+    assert_eq!(a, b, "same seed and inputs: the same decision");
+    let p = core.params().trajectory;
+    for pt in a.trajectory.points() {
+        assert!(
+            pt.speed <= p.max_speed_mps + 1e-6
+                && pt.accel <= p.max_accel_mps2 + 1e-6
+                && pt.accel >= -p.max_brake_mps2 - 1e-6
+        );
+        assert!(pt.l.abs() <= p.max_lateral_offset_m + 1e-6);
+    }
+}
+
+#[test]
+fn table2_score_of_a_constant_speed_candidate() {
+    // A lone ego at 10 m/s on the straight westbound lane: holding speed has no jerk, so
+    // S = c_e · (goal / v) / T_ref with the goal the reference distance (no conflict).
+    let p = Params::default();
+    let mut core =
+        concord_core::DecisionCore::new(p, Morphology::built_in(BuiltIn::PaperIntersection))
+            .unwrap();
+    let ego = vehicle(0, Vec2::new(40.0, 5.0), std::f64::consts::PI, 10.0);
+    let scene = concord_core::Scene::new(0.0, ego, paper::WEST_STRAIGHT);
+    core.step(&scene, 0.0, None).unwrap();
+    let c = core
+        .planner()
+        .evaluate(3.0, 10.0, 0.0, &p.trajectory)
+        .expect("feasible");
+    let goal = p.choice.reference_speed_mps * p.trajectory.t_ref_s;
+    let expected = p.trajectory.c_efficiency * (goal / 10.0) / p.trajectory.t_ref_s;
+    assert!(
+        (c.score - expected).abs() < 1e-9,
+        "{} vs {expected}",
+        c.score
+    );
+}

@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Sets up and runs every check and test of Concord. This is the README's test command and what
+# CI runs (.ci/run). Needs only a Rust toolchain; crates come from crates.io.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+step() { printf '\n==> %s\n' "$*"; }
+
+step "formatting (cargo fmt --check)"
+cargo fmt --all -- --check
+
+step "lints (cargo clippy -D warnings)"
+cargo clippy --workspace --all-targets -- -D warnings
+
+step "tests (cargo test --workspace)"
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+cargo test --workspace 2>&1 | tee "$log"
+passed=$(grep -o '[0-9]* passed' "$log" | awk '{s += $1} END {print s + 0}')
+failed=$(grep -o '[0-9]* failed' "$log" | awk '{s += $1} END {print s + 0}')
+
+step "benchmarks run once each (criterion --test)"
+cargo bench -p concord-bench --bench core_step -- --test
+
+step "the demo completes the paper's left turn"
+cargo run --release --quiet -- demo --speed 8 | tail -n 2 | tee /dev/stderr | grep -q "turn completed"
+
+step "the core is no_std without alloc"
+grep -q '^#!\[no_std\]' core/src/lib.rs
+if grep -rn 'extern crate alloc\|extern crate std' core/src; then exit 1; fi
+
+echo
+echo "all checks passed"
+echo "tests: $passed passed, $failed failed"
