@@ -257,14 +257,11 @@ impl DecisionCore {
             executed = Some((m, best, stats));
         }
         if executed.is_none() {
-            let mut order = [self.choice.choice, Maneuver::Decelerate];
-            if order[0] == Maneuver::Decelerate {
-                order[1] = Maneuver::Decelerate;
-            }
-            for (k, m) in order.into_iter().enumerate() {
-                if k == 1 && m == order[0] {
-                    break;
-                }
+            // The logit choice, then "decelerate" unless that was the choice.
+            let order = [self.choice.choice, Maneuver::Decelerate];
+            let tries = if order[0] == order[1] { 1 } else { 2 };
+            for m in order.into_iter().take(tries) {
+                // Reuse the advice's safety check when it planned this maneuver already.
                 let (best, stats) = match planned {
                     Some((pm, best, stats)) if pm == m => (best, stats),
                     _ => plan(
@@ -360,24 +357,49 @@ impl DecisionCore {
         }
     }
 
-    /// Distance from arc length `s` to where a yielding ego stops: the entry of the nearest
-    /// conflict zone, not yet reached, that an agent is approaching, less the stop margin and
-    /// half a vehicle length.
+    /// Distance from arc length `s` to where a yielding ego stops: before the nearest conflict
+    /// zone, not yet reached, that an agent is approaching, by the stop margin plus half a
+    /// vehicle length. A stop point that would leave the car inside another crossing of its
+    /// lane moves back before that crossing ("don't block the box"); when no such point is
+    /// ahead, there is nothing to yield at (∞).
     fn yield_distance_from(&self, s: f64) -> f64 {
         let p = &self.params;
-        self.conflicts
+        let before = p.opm.conflict_zone_half_m
+            + p.trajectory.stop_margin_m
+            + 0.5 * p.trajectory.vehicle_length_m;
+        let mut stop = self
+            .conflicts
             .pairs()
             .iter()
             .filter(|c| c.agent_ttc_s < p.opm.ttc_max_s)
-            .map(|c| {
-                c.ego_point_s
-                    - p.opm.conflict_zone_half_m
-                    - p.trajectory.stop_margin_m
-                    - 0.5 * p.trajectory.vehicle_length_m
-                    - s
-            })
-            .filter(|d| *d > 0.0)
-            .fold(f64::INFINITY, f64::min)
+            .map(|c| c.ego_point_s - before)
+            .filter(|stop| *stop > s)
+            .fold(f64::INFINITY, f64::min);
+        // Each crossing of the ego's lane occupies [point − before, point + before]; crossings
+        // are few, so a fixed number of passes settles the stop point.
+        for _ in 0..scene::MAX_CONFLICTS {
+            let inside = self
+                .morph
+                .conflicts()
+                .iter()
+                .filter_map(
+                    |c| match (c.lane_a == self.ego_lane, c.lane_b == self.ego_lane) {
+                        (true, _) => Some(c.s_a),
+                        (_, true) => Some(c.s_b),
+                        _ => None,
+                    },
+                )
+                .find(|point| (stop - point).abs() < before);
+            match inside {
+                Some(point) => stop = point - before,
+                None => break,
+            }
+        }
+        if stop > s {
+            stop - s
+        } else {
+            f64::INFINITY
+        }
     }
 
     /// Distance to clear the nearest conflict zone ahead, else the reference distance.

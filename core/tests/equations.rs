@@ -333,3 +333,55 @@ fn table2_score_of_a_constant_speed_candidate() {
         c.score
     );
 }
+
+#[test]
+fn stale_scene_fallback_brakes_from_where_the_last_plan_puts_the_ego() {
+    let mut core = paper_core(Params::default());
+    assert!(
+        core.stale_fallback(1.0).is_none(),
+        "nothing to continue before the first decision"
+    );
+    let d = core.step(&paper_scene(0.0, 8.0, 8.0), 0.0, None).unwrap();
+    let f = core
+        .stale_fallback(0.5)
+        .expect("a fallback after a decision");
+    assert_eq!(f.source, concord_core::DecisionSource::MinimumRisk);
+    assert_eq!(f.fallback, concord_core::FallbackReason::StaleScene);
+    let start = d.trajectory.sample(0.5).unwrap();
+    assert!(
+        (f.trajectory.points[0].s - start.s).abs() < 1e-9,
+        "starts where the last plan had the ego"
+    );
+    let speeds: Vec<f64> = f.trajectory.points().iter().map(|p| p.speed).collect();
+    assert!(
+        speeds.windows(2).all(|w| w[1] <= w[0] + 1e-12),
+        "speed never rises"
+    );
+    assert!(
+        speeds.last().unwrap().abs() < 1e-9,
+        "it comes to a stop within the horizon"
+    );
+}
+
+#[test]
+fn merge_geometry_conflicts_where_the_ramp_joins() {
+    use concord_core::scene::merge;
+    let m = Morphology::built_in(BuiltIn::Merge);
+    let (s_main, s_ramp) = m
+        .conflict_between(merge::MAIN, merge::RAMP)
+        .expect("the ramp joins the main lane");
+    assert!(
+        (s_main - 150.0).abs() < 1e-6,
+        "joins at the origin, 150 m along the main lane"
+    );
+    let taper = (60f64.powi(2) + 12f64.powi(2)).sqrt();
+    assert!((s_ramp - (90.0 + taper)).abs() < 1e-6);
+    // A ramp ego and a main-lane car arriving together form a risky conflict.
+    let mut core = concord_core::DecisionCore::new(Params::default(), m).unwrap();
+    let (pos, tangent, _) = m.lane(merge::RAMP).to_cartesian(s_ramp - 40.0, 0.0, 0);
+    let mut scene = concord_core::Scene::new(0.0, vehicle(0, pos, tangent, 10.0), merge::RAMP);
+    scene.push(vehicle(1, Vec2::new(-40.0, 0.0), 0.0, 10.0));
+    core.step(&scene, 0.0, None).unwrap();
+    assert_eq!(core.triplet().n_conflicts, 1);
+    assert!(core.triplet().conflicts[0].delta_ttc_s < 1e-6);
+}
