@@ -95,16 +95,6 @@ fn load_params(path: Option<&Path>) -> Result<Params, String> {
     Ok(params)
 }
 
-fn vehicle(id: u32, pos: Vec2, heading: f64, speed: f64) -> AgentState {
-    AgentState {
-        id,
-        pos,
-        vel: Vec2::from_angle(heading).scale(speed),
-        heading,
-        ..AgentState::default()
-    }
-}
-
 /// The paper's left turn against a constant-speed HDV, logit-only, at 20 Hz.
 fn demo(speed: f64, params: Option<&Path>, duration: f64) -> Result<(), String> {
     if !(speed.is_finite() && (0.0..=30.0).contains(&speed)) {
@@ -115,9 +105,9 @@ fn demo(speed: f64, params: Option<&Path>, duration: f64) -> Result<(), String> 
         DecisionCore::new(params, Morphology::built_in(BuiltIn::PaperIntersection))
             .map_err(|e| e.to_string())?,
     );
-    let ego = vehicle(0, Vec2::new(40.0, 5.0), std::f64::consts::PI, speed);
+    let ego = AgentState::moving(0, Vec2::new(40.0, 5.0), std::f64::consts::PI, speed);
     let mut scene = Scene::new(0.0, ego, paper::CAV_LEFT);
-    scene.push(vehicle(1, Vec2::new(-40.0, -5.0), 0.0, speed));
+    scene.push(AgentState::moving(1, Vec2::new(-40.0, -5.0), 0.0, speed));
     println!("Concord demo: the paper's unprotected left turn, CAV and HDV at {speed} m/s (in-process, logit-only, constant-speed HDV)");
     println!(
         "{:>6} {:>16} {:>6} {:>11} {:>7}  P_n [acc dec keep left right]",

@@ -1,8 +1,8 @@
 //! Criterion benches of the decision core: the full step over agents × samples, and the
 //! trajectory stage alone (per candidate).
 
-use concord_bench::{core, vehicle, Traffic};
-use concord_core::scene::{paper, BuiltIn, Morphology, Scene, Vec2};
+use concord_bench::{core, Traffic};
+use concord_core::scene::{paper, AgentState, BuiltIn, Morphology, Scene, Vec2};
 use concord_core::{DecisionCore, Maneuver, Params};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::hint::black_box;
@@ -32,14 +32,19 @@ fn full_step(c: &mut Criterion) {
 fn trajectory_stage(c: &mut Criterion) {
     let samples = 1024;
     let mut core = Box::new(core(samples));
-    let ego = vehicle(0, Vec2::new(30.0, 5.0), core::f64::consts::PI, 8.0);
+    let ego = AgentState::moving(0, Vec2::new(30.0, 5.0), core::f64::consts::PI, 8.0);
     let mut scene = Scene::new(0.0, ego, paper::CAV_LEFT);
     // Ten obstacles: crossing, oncoming and turning traffic that the horizon reaches.
     let lanes = [1u8, 1, 1, 3, 3, 4, 4, 5, 5, 7];
     for (i, lane) in lanes.iter().enumerate() {
         let l = core.morphology().lane(*lane);
         let (pos, tangent, _) = l.to_cartesian(8.0 + 6.0 * i as f64, 0.0, 0);
-        scene.push(vehicle(i as u32 + 1, pos, tangent, 4.0 + (i % 4) as f64));
+        scene.push(AgentState::moving(
+            i as u32 + 1,
+            pos,
+            tangent,
+            4.0 + (i % 4) as f64,
+        ));
     }
     core.step(&scene, 0.0, None).expect("valid scene");
     let profile = core.choice().profiles[core.last_decision().maneuver.index()];
@@ -80,14 +85,14 @@ fn like_for_like(c: &mut Criterion) {
     params.trajectory.sigma_lateral_m = 0.4;
     let morph = Morphology::built_in(BuiltIn::PaperIntersection);
     let mut core = Box::new(DecisionCore::new(params, morph).expect("valid parameters"));
-    let ego = vehicle(0, Vec2::new(25.0, 5.0), core::f64::consts::PI, 5.0);
+    let ego = AgentState::moving(0, Vec2::new(25.0, 5.0), core::f64::consts::PI, 5.0);
     let mut scene = Scene::new(0.0, ego, paper::CAV_LEFT);
     let lane = morph.lane(paper::CAV_LEFT);
     for i in 0..10 {
         let s = 30.0 + 4.0 * i as f64;
         let l = if i % 2 == 0 { 4.0 } else { -4.0 };
         let (pos, tangent, _) = lane.to_cartesian(s, l, 0);
-        scene.push(vehicle(i as u32 + 1, pos, tangent, 0.0));
+        scene.push(AgentState::moving(i as u32 + 1, pos, tangent, 0.0));
     }
     core.step(&scene, 0.0, None).expect("valid scene");
     let profile = core.choice().profiles[Maneuver::KeepSpeed.index()];

@@ -3,17 +3,6 @@
 use concord_core::scene::{paper, AgentState, BuiltIn, Morphology, Scene, Vec2, MAX_AGENTS};
 use concord_core::{Decision, DecisionCore, Params};
 
-/// A vehicle at `pos` moving at `speed` along `heading`.
-pub fn vehicle(id: u32, pos: Vec2, heading: f64, speed: f64) -> AgentState {
-    AgentState {
-        id,
-        pos,
-        vel: Vec2::from_angle(heading).scale(speed),
-        heading,
-        ..AgentState::default()
-    }
-}
-
 /// A core on the paper's intersection with `samples` Monte Carlo samples.
 pub fn core(samples: usize) -> DecisionCore {
     let mut params = Params::default();
@@ -64,13 +53,14 @@ impl Traffic {
             t.lanes[i] = lane;
             t.s[i] = s;
             let (pos, tangent, _) = core.morphology().lane(lane).to_cartesian(s, 0.0, 0);
-            t.scene.push(vehicle(i as u32 + 1, pos, tangent, speed));
+            t.scene
+                .push(AgentState::moving(i as u32 + 1, pos, tangent, speed));
         }
         t
     }
 
     fn ego_at_start() -> AgentState {
-        vehicle(0, Vec2::new(40.0, 5.0), core::f64::consts::PI, 8.0)
+        AgentState::moving(0, Vec2::new(40.0, 5.0), core::f64::consts::PI, 8.0)
     }
 
     /// Moves everything `dt` s on: the ego along `decision`'s trajectory, the others along
@@ -99,7 +89,7 @@ impl Traffic {
                 self.s[i] = 0.0;
             }
             let (pos, tangent, _) = lane.to_cartesian(self.s[i], 0.0, 0);
-            *a = vehicle(a.id, pos, tangent, a.speed());
+            *a = AgentState::moving(a.id, pos, tangent, a.speed());
         }
     }
 }

@@ -191,6 +191,17 @@ pub struct AgentState {
 }
 
 impl AgentState {
+    /// A car at `pos` moving at `speed` m/s along `heading` rad, unaccelerated, with no intent.
+    pub fn moving(id: u32, pos: Vec2, heading: f64, speed: f64) -> Self {
+        AgentState {
+            id,
+            pos,
+            vel: Vec2::from_angle(heading).scale(speed),
+            heading,
+            ..AgentState::default()
+        }
+    }
+
     /// Speed |v|, m/s.
     pub fn speed(&self) -> f64 {
         self.vel.norm()

@@ -7,7 +7,7 @@ use std::cell::Cell;
 
 use common::*;
 use concord_core::scene::{Vec2, MAX_AGENTS};
-use concord_core::{Advice, Maneuver, Params};
+use concord_core::{Advice, AgentState, Maneuver, Params};
 
 struct Counting;
 
@@ -46,7 +46,12 @@ fn ten_thousand_steps_with_32_agents_and_1024_samples_allocate_nothing() {
     for i in 1..MAX_AGENTS {
         let lane = core.morphology().lane((i % 8) as u8);
         let (pos, tangent, _) = lane.to_cartesian(5.0 + 2.5 * i as f64, 0.0, 0);
-        scene.push(vehicle(i as u32 + 1, pos, tangent, 3.0 + (i % 5) as f64));
+        scene.push(AgentState::moving(
+            i as u32 + 1,
+            pos,
+            tangent,
+            3.0 + (i % 5) as f64,
+        ));
     }
     assert_eq!(scene.n_agents, MAX_AGENTS);
     let dt = 0.05;

@@ -7,7 +7,7 @@ use concord_core::choice::{argmax, correct, cosine, idm_accel, ChoiceHistory, Ma
 use concord_core::opm::{delta_ttc, guarded_ttc};
 use concord_core::params::{AdviceParams, ChoiceParams, OpmParams, Params};
 use concord_core::saliency::{attend, softmax, Saliency, FEATURES};
-use concord_core::scene::{paper, BuiltIn, Morphology, ProcessState, Turn, Vec2};
+use concord_core::scene::{paper, AgentState, BuiltIn, Morphology, ProcessState, Turn, Vec2};
 use concord_core::trajectory::{Quartic, Quintic};
 
 const EPS: f64 = 1e-9;
@@ -34,14 +34,14 @@ fn eq2_paper_geometry_has_the_conflict_point_at_minus_five_minus_five() {
 #[test]
 fn eq3_process_state_of_the_hdv() {
     let m = Morphology::built_in(BuiltIn::PaperIntersection);
-    let hdv = vehicle(1, Vec2::new(-40.0, -5.0), 0.0, 8.0);
+    let hdv = AgentState::moving(1, Vec2::new(-40.0, -5.0), 0.0, 8.0);
     let p = ProcessState::of(&hdv, &m, 1.0);
     assert_eq!(p.lane, Some(paper::HDV_STRAIGHT));
     assert!((p.dist_to_stop_m - 30.0).abs() < EPS);
     assert!((p.speed_mps - 8.0).abs() < EPS);
     assert!(p.theta_v.abs() < EPS && p.l_m.abs() < EPS);
     // A vehicle heading the wrong way matches no lane of its position.
-    let wrong = vehicle(2, Vec2::new(-40.0, -5.0), std::f64::consts::PI, 8.0);
+    let wrong = AgentState::moving(2, Vec2::new(-40.0, -5.0), std::f64::consts::PI, 8.0);
     assert_eq!(ProcessState::of(&wrong, &m, 1.0).lane, None);
 }
 
@@ -318,7 +318,7 @@ fn table2_score_of_a_constant_speed_candidate() {
     let mut core =
         concord_core::DecisionCore::new(p, Morphology::built_in(BuiltIn::PaperIntersection))
             .unwrap();
-    let ego = vehicle(0, Vec2::new(40.0, 5.0), std::f64::consts::PI, 10.0);
+    let ego = AgentState::moving(0, Vec2::new(40.0, 5.0), std::f64::consts::PI, 10.0);
     let scene = concord_core::Scene::new(0.0, ego, paper::WEST_STRAIGHT);
     core.step(&scene, 0.0, None).unwrap();
     let c = core
@@ -379,8 +379,9 @@ fn merge_geometry_conflicts_where_the_ramp_joins() {
     // A ramp ego and a main-lane car arriving together form a risky conflict.
     let mut core = concord_core::DecisionCore::new(Params::default(), m).unwrap();
     let (pos, tangent, _) = m.lane(merge::RAMP).to_cartesian(s_ramp - 40.0, 0.0, 0);
-    let mut scene = concord_core::Scene::new(0.0, vehicle(0, pos, tangent, 10.0), merge::RAMP);
-    scene.push(vehicle(1, Vec2::new(-40.0, 0.0), 0.0, 10.0));
+    let mut scene =
+        concord_core::Scene::new(0.0, AgentState::moving(0, pos, tangent, 10.0), merge::RAMP);
+    scene.push(AgentState::moving(1, Vec2::new(-40.0, 0.0), 0.0, 10.0));
     core.step(&scene, 0.0, None).unwrap();
     assert_eq!(core.triplet().n_conflicts, 1);
     assert!(core.triplet().conflicts[0].delta_ttc_s < 1e-6);

@@ -20,7 +20,7 @@ fn agent_on_lane(core: &concord_core::DecisionCore, id: u32, spec: AgentSpec) ->
     let (lane, s, v, a, conf) = spec;
     let lane = core.morphology().lane(lane);
     let (pos, tangent, _) = lane.to_cartesian(s, 0.0, 0);
-    let mut agent = vehicle(id, pos, tangent, v);
+    let mut agent = AgentState::moving(id, pos, tangent, v);
     agent.acc = Vec2::from_angle(tangent).scale(a);
     agent.intent = ExplicitIntent {
         style: Some(Rated {

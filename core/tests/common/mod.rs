@@ -4,22 +4,16 @@
 use concord_core::scene::{paper, AgentState, BuiltIn, Morphology, Scene, Vec2};
 use concord_core::{DecisionCore, Params};
 
-/// A vehicle at `pos` moving at `speed` along `heading`.
-pub fn vehicle(id: u32, pos: Vec2, heading: f64, speed: f64) -> AgentState {
-    AgentState {
-        id,
-        pos,
-        vel: Vec2::from_angle(heading).scale(speed),
-        heading,
-        ..AgentState::default()
-    }
-}
-
 /// The paper's initial scene: CAV at (40, 5) heading west, HDV at (−40, −5) heading east.
 pub fn paper_scene(t: f64, cav_speed: f64, hdv_speed: f64) -> Scene {
-    let ego = vehicle(0, Vec2::new(40.0, 5.0), core::f64::consts::PI, cav_speed);
+    let ego = AgentState::moving(0, Vec2::new(40.0, 5.0), core::f64::consts::PI, cav_speed);
     let mut scene = Scene::new(t, ego, paper::CAV_LEFT);
-    scene.push(vehicle(1, Vec2::new(-40.0, -5.0), 0.0, hdv_speed));
+    scene.push(AgentState::moving(
+        1,
+        Vec2::new(-40.0, -5.0),
+        0.0,
+        hdv_speed,
+    ));
     scene
 }
 
