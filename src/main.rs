@@ -1,12 +1,15 @@
 //! `concord`: the command line of the Concord decision service.
 
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
-use std::time::Instant;
+use std::process::{Child, Command as Process, ExitCode, Stdio};
+use std::time::Duration;
 
-use clap::{Parser, Subcommand};
-use concord_core::scene::{paper, AgentState, BuiltIn, Morphology, Scene, Vec2};
-use concord_core::{DecisionCore, DecisionSource, Params};
+use clap::{Parser, Subcommand, ValueEnum};
+use concord_core::DecisionCore;
+use concord_ipc::core_service::{self, RunConfig, StopAfter};
+use concord_ipc::feed::{self, Fault, FeedConfig, Scenario};
+use concord_ipc::wire::{CoreStats, EhmiMessage, WireDecision};
+use concord_ipc::{clock, iox, monitor, services};
 
 #[derive(Parser)]
 #[command(
@@ -15,36 +18,97 @@ use concord_core::{DecisionCore, DecisionSource, Params};
     about = "Onboard interactive decision service for automated vehicles"
 )]
 struct Cli {
+    /// iceoryx2 configuration file [default: $CONCORD_IOX_CONFIG, else deploy/iceoryx2.toml
+    /// when present, else iceoryx2's defaults].
+    #[arg(long, global = true)]
+    iox_config: Option<PathBuf>,
     #[command(subcommand)]
     command: Command,
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+enum ScenarioArg {
+    Paper,
+    Merge,
+    Dense,
+}
+
 #[derive(Subcommand)]
 enum Command {
-    /// Run the paper's unprotected left turn in closed loop and print each decision.
+    /// Run the paper's left turn across processes: feed, core and a console; ends with a summary.
     Demo {
         /// Initial speed of both vehicles, m/s (the paper uses 6, 8 and 10).
         #[arg(long, default_value_t = 8.0)]
         speed: f64,
-        /// Parameter file (TOML); defaults are used for missing keys.
-        #[arg(long)]
-        params: Option<PathBuf>,
-        /// Simulated time limit, s.
+        /// Time limit, s.
         #[arg(long, default_value_t = 30.0)]
         duration: f64,
     },
-    /// Print the default parameters as TOML, or check a parameter file.
+    /// Run the onboard core process.
+    Run {
+        /// Configuration file (TOML; see deploy/concord.toml). Missing keys take defaults.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Service-name prefix, overriding the file's.
+        #[arg(long)]
+        prefix: Option<String>,
+        /// Loop rate, Hz, overriding the file's.
+        #[arg(long)]
+        rate: Option<f64>,
+        /// Stop after this many seconds (default: run until SIGINT/SIGTERM).
+        #[arg(long)]
+        duration: Option<f64>,
+    },
+    /// Publish synthetic scenes.
+    Feed {
+        #[arg(long, value_enum, default_value_t = ScenarioArg::Paper)]
+        scenario: ScenarioArg,
+        /// Frame rate, Hz.
+        #[arg(long, default_value_t = 20.0)]
+        rate: f64,
+        /// Initial speed of the ego and the HDV, m/s.
+        #[arg(long, default_value_t = 8.0)]
+        speed: f64,
+        /// Road users besides the ego in the dense scenario.
+        #[arg(long, default_value_t = 16)]
+        agents: usize,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Stop after this many seconds (default: when the scenario ends).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Start the scenario over when it ends.
+        #[arg(long)]
+        repeat: bool,
+        /// Ignore decisions: the ego keeps its speed along its route.
+        #[arg(long)]
+        open_loop: bool,
+        /// Faults to inject in turn: nan, jump, stall, duplicate, reorder, restart.
+        #[arg(long, value_delimiter = ',')]
+        faults: Vec<String>,
+        /// Inject one fault every this many frames.
+        #[arg(long, default_value_t = 50)]
+        fault_every: u64,
+        #[arg(long, default_value = services::DEFAULT_PREFIX)]
+        prefix: String,
+    },
+    /// Show a running core's counters, latencies, last decision and eHMI text.
+    Monitor {
+        #[arg(long, default_value = services::DEFAULT_PREFIX)]
+        prefix: String,
+        /// Refresh period, s.
+        #[arg(long, default_value_t = 1.0)]
+        period: f64,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+    },
+    /// Print the default configuration as TOML, or check a configuration file.
     Params {
         /// File to check instead of printing the defaults.
         #[arg(long)]
         check: Option<PathBuf>,
     },
-    /// Run the onboard core process over iceoryx2 (not yet available).
-    Run,
-    /// Publish synthetic scenes (not yet available).
-    Feed,
-    /// Show live counters of a running core (not yet available).
-    Monitor,
     /// Run the LLM sidecar (not yet available).
     Sidecar,
     /// Rerun the paper's experiments (not yet available).
@@ -53,20 +117,84 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    let iox_path = cli.iox_config.or_else(default_iox_config);
     let result = match cli.command {
-        Command::Demo {
-            speed,
-            params,
+        Command::Demo { speed, duration } => demo(speed, duration, iox_path.as_deref()),
+        Command::Run {
+            config,
+            prefix,
+            rate,
             duration,
-        } => demo(speed, params.as_deref(), duration),
-        Command::Params { check: None } => toml::to_string_pretty(&Params::default())
+        } => run(
+            config.as_deref(),
+            prefix,
+            rate,
+            duration,
+            iox_path.as_deref(),
+        ),
+        Command::Feed {
+            scenario,
+            rate,
+            speed,
+            agents,
+            seed,
+            duration,
+            repeat,
+            open_loop,
+            faults,
+            fault_every,
+            prefix,
+        } => (|| {
+            let faults = faults
+                .iter()
+                .map(|f| Fault::parse(f).ok_or_else(|| format!("--faults: unknown fault {f:?} (nan, jump, stall, duplicate, reorder, restart)")))
+                .collect::<Result<Vec<_>, _>>()?;
+            if !(rate.is_finite() && rate > 0.0 && rate <= 1000.0) {
+                return Err(format!("--rate {rate}: expected 0 to 1000 Hz"));
+            }
+            let cfg = FeedConfig {
+                prefix,
+                rate_hz: rate,
+                scenario: match scenario {
+                    ScenarioArg::Paper => Scenario::Paper,
+                    ScenarioArg::Merge => Scenario::Merge,
+                    ScenarioArg::Dense => Scenario::Dense,
+                },
+                speed_mps: speed,
+                agents,
+                seed,
+                duration_s: duration,
+                repeat,
+                closed_loop: !open_loop,
+                faults,
+                fault_every,
+                ..FeedConfig::default()
+            };
+            let iox_config = iox::init(iox_path.as_deref()).map_err(|e| e.to_string())?;
+            let summary = feed::run(&cfg, &iox_config).map_err(|e| e.to_string())?;
+            println!("{summary}");
+            Ok(())
+        })(),
+        Command::Monitor {
+            prefix,
+            period,
+            duration,
+        } => iox::init(iox_path.as_deref())
+            .and_then(|c| {
+                monitor::run(
+                    &prefix,
+                    Duration::from_secs_f64(period.max(0.05)),
+                    duration,
+                    &c,
+                )
+            })
+            .map(|_| ())
+            .map_err(|e| e.to_string()),
+        Command::Params { check: None } => toml::to_string_pretty(&RunConfig::default())
             .map(|t| print!("{t}"))
             .map_err(|e| e.to_string()),
         Command::Params { check: Some(path) } => {
-            load_params(Some(&path)).map(|_| println!("{}: ok", path.display()))
-        }
-        Command::Run | Command::Feed | Command::Monitor => {
-            Err("not yet available: it lands with the onboard-service issue".into())
+            load_config(Some(&path)).map(|_| println!("{}: ok", path.display()))
         }
         Command::Sidecar => Err("not yet available: it lands with the LLM-sidecar issue".into()),
         Command::Experiment => {
@@ -82,93 +210,241 @@ fn main() -> ExitCode {
     }
 }
 
-/// Parameters from `path` (or the defaults), validated.
-fn load_params(path: Option<&Path>) -> Result<Params, String> {
-    let params: Params = match path {
-        None => Params::default(),
+fn default_iox_config() -> Option<PathBuf> {
+    std::env::var_os("CONCORD_IOX_CONFIG")
+        .map(PathBuf::from)
+        .or_else(|| Some(PathBuf::from("deploy/iceoryx2.toml")).filter(|p| p.exists()))
+}
+
+/// The configuration from `path` (or the defaults), validated.
+fn load_config(path: Option<&Path>) -> Result<RunConfig, String> {
+    let cfg: RunConfig = match path {
+        None => RunConfig::default(),
         Some(p) => {
             let text = std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?;
             toml::from_str(&text).map_err(|e| format!("{}: {e}", p.display()))?
         }
     };
-    params.validate().map_err(|e| e.to_string())?;
-    Ok(params)
+    cfg.validate()?;
+    Ok(cfg)
 }
 
-/// The paper's left turn against a constant-speed HDV, logit-only, at 20 Hz.
-fn demo(speed: f64, params: Option<&Path>, duration: f64) -> Result<(), String> {
+fn run(
+    config: Option<&Path>,
+    prefix: Option<String>,
+    rate: Option<f64>,
+    duration: Option<f64>,
+    iox_path: Option<&Path>,
+) -> Result<(), String> {
+    let mut cfg = load_config(config)?;
+    if let Some(p) = prefix {
+        cfg.service.prefix = p;
+    }
+    if let Some(r) = rate {
+        cfg.service.rate_hz = r;
+    }
+    cfg.validate()?;
+    let iox_config = iox::init(iox_path).map_err(|e| e.to_string())?;
+    let mut core = Box::new(
+        DecisionCore::new(cfg.core, cfg.service.geometry.morphology())
+            .map_err(|e| e.to_string())?,
+    );
+    eprintln!(
+        "concord run: {} Hz on {}*, {} samples, staleness {} s",
+        cfg.service.rate_hz,
+        cfg.service.prefix,
+        cfg.core.trajectory.samples,
+        cfg.service.staleness_s
+    );
+    core_service::run(
+        &mut core,
+        &cfg.service,
+        &cfg.realtime,
+        &iox_config,
+        StopAfter {
+            ticks: None,
+            duration_s: duration,
+        },
+    )
+    .map(|_| ())
+    .map_err(|e| e.to_string())
+}
+
+/// A child `concord` process that is terminated (SIGTERM, then SIGKILL) when dropped.
+struct ChildProcess(Child);
+
+impl ChildProcess {
+    fn spawn(args: &[&str], stdout: Stdio) -> Result<Self, String> {
+        let exe = std::env::current_exe().map_err(|e| format!("locating concord: {e}"))?;
+        Process::new(exe)
+            .args(args)
+            .stdout(stdout)
+            .spawn()
+            .map(ChildProcess)
+            .map_err(|e| format!("starting concord {}: {e}", args.join(" ")))
+    }
+    fn terminate(&mut self) {
+        // SAFETY: kill with a valid pid and signal.
+        unsafe { libc::kill(self.0.id() as i32, libc::SIGTERM) };
+        for _ in 0..50 {
+            if let Ok(Some(_)) = self.0.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+impl Drop for ChildProcess {
+    fn drop(&mut self) {
+        if let Ok(None) = self.0.try_wait() {
+            self.terminate();
+        }
+    }
+}
+
+/// The paper's left turn across processes: `concord run` and `concord feed` as children, this
+/// process as the console.
+fn demo(speed: f64, duration: f64, iox_path: Option<&Path>) -> Result<(), String> {
     if !(speed.is_finite() && (0.0..=30.0).contains(&speed)) {
         return Err(format!("--speed {speed}: expected 0 to 30 m/s"));
     }
-    let params = load_params(params)?;
-    let mut core = Box::new(
-        DecisionCore::new(params, Morphology::built_in(BuiltIn::PaperIntersection))
-            .map_err(|e| e.to_string())?,
-    );
-    let ego = AgentState::moving(0, Vec2::new(40.0, 5.0), std::f64::consts::PI, speed);
-    let mut scene = Scene::new(0.0, ego, paper::CAV_LEFT);
-    scene.push(AgentState::moving(1, Vec2::new(-40.0, -5.0), 0.0, speed));
-    println!("Concord demo: the paper's unprotected left turn, CAV and HDV at {speed} m/s (in-process, logit-only, constant-speed HDV)");
-    println!(
-        "{:>6} {:>16} {:>6} {:>11} {:>7}  P_n [acc dec keep left right]",
-        "t [s]", "ego (x, y) [m]", "v", "maneuver", "source"
-    );
-    let dt = 0.05;
-    let mut latencies = Vec::new();
-    let mut min_gap = f64::INFINITY;
-    let mut cleared = None;
-    let steps = (duration / dt).ceil() as u64;
-    for k in 0..steps {
-        let t = k as f64 * dt;
-        scene.time_s = t;
-        let started = Instant::now();
-        let d = core
-            .step(&scene, t, None)
-            .map_err(|e| format!("scene rejected: {e:?}"))?;
-        latencies.push(started.elapsed().as_secs_f64() * 1e6);
-        if k % 10 == 0 || d.source == DecisionSource::MinimumRisk {
-            let p = d.p_corrected.map(|v| format!("{v:.2}")).join(" ");
+    let prefix = format!("concord-demo-{}/", std::process::id());
+    let iox_config = iox::init(iox_path).map_err(|e| e.to_string())?;
+    let iox_args: Vec<String> = iox_path
+        .map(|p| vec!["--iox-config".into(), p.display().to_string()])
+        .unwrap_or_default();
+    let with_iox = |mut v: Vec<String>| {
+        v.extend(iox_args.iter().cloned());
+        v
+    };
+    println!("Concord demo: the paper's unprotected left turn, CAV and HDV at {speed} m/s");
+    println!("LLM sidecar: not part of this build yet (it lands with the sidecar issue); deciding logit-only.");
+    let core_args = with_iox(vec![
+        "run".into(),
+        "--prefix".into(),
+        prefix.clone(),
+        "--rate".into(),
+        "50".into(),
+    ]);
+    let mut core = ChildProcess::spawn(
+        &core_args.iter().map(String::as_str).collect::<Vec<_>>(),
+        Stdio::null(),
+    )?;
+    let node = iox::node("concord-demo-console", &iox_config).map_err(|e| e.to_string())?;
+    let decisions =
+        iox::subscriber::<WireDecision>(&node, &services::name(&prefix, services::DECISION), 64)
+            .map_err(|e| e.to_string())?;
+    let stats = iox::subscriber::<CoreStats>(&node, &services::name(&prefix, services::STATS), 1)
+        .map_err(|e| e.to_string())?;
+    let ehmi = iox::subscriber::<EhmiMessage>(&node, &services::name(&prefix, services::EHMI), 8)
+        .map_err(|e| e.to_string())?;
+    let feed_args = with_iox(vec![
+        "feed".into(),
+        "--scenario".into(),
+        "paper".into(),
+        "--speed".into(),
+        speed.to_string(),
+        "--duration".into(),
+        duration.to_string(),
+        "--prefix".into(),
+        prefix.clone(),
+    ]);
+    let mut feed = ChildProcess::spawn(
+        &feed_args.iter().map(String::as_str).collect::<Vec<_>>(),
+        Stdio::piped(),
+    )?;
+    let started = clock::now_ns();
+    let mut last_print = 0u64;
+    let mut last_stats = None;
+    let mut last_line = String::new();
+    let feed_status = loop {
+        if node.wait(Duration::from_millis(20)).is_err() {
+            break None;
+        }
+        while let Ok(Some(d)) = decisions.receive() {
+            let line = monitor::describe(&d);
+            let key = line
+                .split(" via ")
+                .nth(1)
+                .unwrap_or("")
+                .split(", P_n")
+                .next()
+                .unwrap_or("")
+                .to_owned();
+            let now = clock::now_ns();
+            if key != last_line || now - last_print > 1_000_000_000 {
+                println!("{:6.2} s  {line}", (now - started) as f64 * 1e-9);
+                last_line = key;
+                last_print = now;
+            }
+        }
+        while let Ok(Some(m)) = ehmi.receive() {
+            println!("         eHMI: {}", m.text().unwrap_or("(invalid UTF-8)"));
+        }
+        if let Ok((Some(s), _)) = iox::newest(&stats) {
+            last_stats = Some(s);
+        }
+        if let Ok(Some(status)) = feed.0.try_wait() {
+            break Some(status);
+        }
+    };
+    let feed_output = feed.0.stdout.take().map(|mut out| {
+        let mut s = String::new();
+        let _ = std::io::Read::read_to_string(&mut out, &mut s);
+        s
+    });
+    std::thread::sleep(Duration::from_millis(300));
+    if let Ok((Some(s), _)) = iox::newest(&stats) {
+        last_stats = Some(s);
+    }
+    core.terminate();
+    println!();
+    match (
+        feed_status,
+        feed_output
+            .as_deref()
+            .and_then(|o| o.lines().find(|l| l.starts_with("feed summary"))),
+    ) {
+        (Some(st), Some(summary)) if st.success() => {
+            let outcome = if summary.contains("completed=1") {
+                "turn completed without collision"
+            } else if summary.contains("collisions=1") {
+                "COLLISION"
+            } else {
+                "turn not completed within the time limit"
+            };
+            println!("outcome: {outcome} ({summary})");
+        }
+        (status, _) => println!("outcome: the feed did not finish cleanly ({status:?})"),
+    }
+    match last_stats {
+        Some(s) => {
+            let us = |ns: u64| ns as f64 / 1000.0;
             println!(
-                "{t:>6.2} ({:>6.1}, {:>5.1}) {:>6.2} {:>11} {:>7}  [{p}]",
-                scene.ego.pos.x,
-                scene.ego.pos.y,
-                scene.ego.speed(),
-                d.maneuver.name(),
-                format!("{:?}", d.source).to_lowercase()
+                "core: {} frames decided, {} rejected, {} missed deadlines; cycle p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs; scene age p50 {:.0} µs",
+                s.frames_accepted,
+                s.frames_rejected.iter().sum::<u64>(),
+                s.missed_deadlines,
+                us(s.cycle_ns[0]),
+                us(s.cycle_ns[2]),
+                us(s.cycle_ns[4]),
+                us(s.scene_age_ns[0])
+            );
+            println!(
+                "advice: {} requests, {} answers (accepted {}, rejected {}); decisions logit {}, advice {}, minimum-risk {}",
+                s.advice_requests,
+                s.advice_received,
+                s.advice_verdicts[1],
+                s.advice_verdicts.iter().skip(2).sum::<u64>(),
+                s.decisions[0],
+                s.decisions[1],
+                s.decisions[2]
             );
         }
-        let next = d.trajectory.sample(dt).ok_or("empty trajectory")?;
-        let now = d.trajectory.points[0];
-        let dir = Vec2::from_angle(next.heading);
-        scene.ego = AgentState {
-            pos: Vec2::new(next.x, next.y),
-            vel: dir.scale(next.speed),
-            acc: dir.scale((next.speed - now.speed) / dt),
-            heading: next.heading,
-            ..scene.ego
-        };
-        let hdv = &mut scene.agents[0];
-        hdv.pos = hdv.pos.plus(hdv.vel.scale(dt));
-        min_gap = min_gap.min(scene.ego.pos.minus(hdv.pos).norm());
-        if scene.ego.pos.y < -15.0 {
-            cleared = Some(t + dt);
-            break;
-        }
+        None => println!("core: no statistics received"),
     }
-    latencies.sort_by(f64::total_cmp);
-    let pct = |q: f64| latencies[((latencies.len() - 1) as f64 * q).round() as usize];
-    match cleared {
-        Some(t) => println!("outcome: turn completed at {t:.2} s; closest approach {min_gap:.1} m"),
-        None => println!(
-            "outcome: turn not completed within {duration} s; closest approach {min_gap:.1} m"
-        ),
-    }
-    println!(
-        "step latency over {} steps: p50 {:.0} µs, p99 {:.0} µs, max {:.0} µs",
-        latencies.len(),
-        pct(0.5),
-        pct(0.99),
-        latencies[latencies.len() - 1]
-    );
     Ok(())
 }

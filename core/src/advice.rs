@@ -23,9 +23,9 @@ pub struct Advice {
     pub received_at_s: f64,
 }
 
+coded_enum! {
 /// What the gate made of the advice this cycle.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[repr(u8)]
 pub enum AdviceVerdict {
     /// No advice was offered.
     #[default]
@@ -44,6 +44,7 @@ pub enum AdviceVerdict {
     NavigationInconsistent = 6,
     /// No feasible collision-free trajectory realises it.
     Unsafe = 7,
+}
 }
 
 impl AdviceVerdict {

@@ -18,9 +18,9 @@ pub const STATE_FEATURES: usize = 6;
 /// Entries of the choice history 𝓗: 2 s at 10 Hz.
 pub const CHOICE_HISTORY: usize = 20;
 
+coded_enum! {
 /// The five maneuvers of §4.2, in the paper's order.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
-#[repr(u8)]
 pub enum Maneuver {
     /// Straight-line acceleration along the route.
     Accelerate = 0,
@@ -34,6 +34,7 @@ pub enum Maneuver {
     /// Follow a right-turning route at the curve's comfortable speed.
     TurnRight = 4,
 }
+}
 
 impl Maneuver {
     pub const ALL: [Maneuver; MANEUVERS] = [
@@ -45,10 +46,6 @@ impl Maneuver {
     ];
     pub fn index(self) -> usize {
         self as usize
-    }
-    /// The maneuver with wire code `i`.
-    pub fn from_index(i: u8) -> Option<Maneuver> {
-        Maneuver::ALL.get(i as usize).copied()
     }
     /// snake_case name.
     pub fn name(self) -> &'static str {

@@ -11,6 +11,26 @@
 
 #![no_std]
 
+/// Declares a `#[repr(u8)]` enum whose discriminants are its wire codes, with
+/// `TryFrom<u8>` (the error is the unknown code).
+macro_rules! coded_enum {
+    ($(#[$meta:meta])* $vis:vis enum $name:ident { $($(#[$vmeta:meta])* $variant:ident = $code:literal),+ $(,)? }) => {
+        $(#[$meta])*
+        #[repr(u8)]
+        $vis enum $name { $($(#[$vmeta])* $variant = $code),+ }
+
+        impl TryFrom<u8> for $name {
+            type Error = u8;
+            fn try_from(code: u8) -> Result<Self, u8> {
+                match code {
+                    $($code => Ok($name::$variant),)+
+                    other => Err(other),
+                }
+            }
+        }
+    };
+}
+
 pub mod advice;
 pub mod choice;
 pub mod opm;
@@ -33,9 +53,9 @@ use saliency::Saliency;
 use scene::{History, Lane, ProcessState, SceneErrorKind, SceneField, Vec2, MAX_AGENTS};
 use trajectory::{Candidate, FrenetState, PlanStats, Planner};
 
+coded_enum! {
 /// Which path produced a decision.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[repr(u8)]
 pub enum DecisionSource {
     /// The corrected logit choice (eq. 15).
     #[default]
@@ -45,10 +65,11 @@ pub enum DecisionSource {
     /// The minimum-risk fallback.
     MinimumRisk = 2,
 }
+}
 
+coded_enum! {
 /// Why the minimum-risk fallback ran.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[repr(u8)]
 pub enum FallbackReason {
     #[default]
     None = 0,
@@ -56,6 +77,7 @@ pub enum FallbackReason {
     NoFeasibleTrajectory = 1,
     /// The scene is older than the staleness limit (decided by the host).
     StaleScene = 2,
+}
 }
 
 /// One decision of the core.

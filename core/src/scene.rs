@@ -58,9 +58,9 @@ impl Vec2 {
     }
 }
 
+coded_enum! {
 /// Kind of road user.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[repr(u8)]
 pub enum AgentKind {
     #[default]
     Car = 0,
@@ -71,10 +71,11 @@ pub enum AgentKind {
     Pedestrian = 5,
     Unknown = 6,
 }
+}
 
+coded_enum! {
 /// Turn-signal state, one of the explicit cues of §4.1.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[repr(u8)]
 pub enum TurnSignal {
     #[default]
     Off = 0,
@@ -82,19 +83,21 @@ pub enum TurnSignal {
     Right = 2,
     Hazard = 3,
 }
+}
 
+coded_enum! {
 /// Driving style I_style (eq. 8).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u8)]
 pub enum Style {
     Aggressive = 0,
     Balanced = 1,
     Conservative = 2,
 }
+}
 
+coded_enum! {
 /// Current action I_action (eq. 8) as announced or parsed from language.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u8)]
 pub enum IntentAction {
     /// "Go ahead", "after you".
     Yield = 0,
@@ -106,15 +109,17 @@ pub enum IntentAction {
     TurnRight = 5,
     Stop = 6,
 }
+}
 
+coded_enum! {
 /// Task I_task (eq. 8); it sets priority.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u8)]
 pub enum Task {
     Commute = 0,
     Emergency = 1,
     Official = 2,
     Leisure = 3,
+}
 }
 
 /// One intent dimension with the confidence of its parse, in [0, 1].
@@ -381,15 +386,16 @@ fn check_agent(a: &AgentState, lim: &InputLimits) -> Result<(), (SceneField, Sce
     Ok(())
 }
 
+coded_enum! {
 /// Turn a lane makes through the junction; for the ego's route lane it is the navigation
 /// instruction.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[repr(u8)]
 pub enum Turn {
     #[default]
     Straight = 0,
     Left = 1,
     Right = 2,
+}
 }
 
 /// A point of a lane reference line in Frenet coordinates.

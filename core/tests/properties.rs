@@ -143,7 +143,7 @@ proptest! {
         let mut log = RequestLog::default();
         for c in 1..=latest { log.issue(c, c as f64 * 0.05); }
         let route = [Turn::Straight, Turn::Left, Turn::Right][route as usize];
-        let m = Maneuver::from_index(maneuver).unwrap();
+        let m = Maneuver::try_from(maneuver).unwrap();
         let issued = id as f64 * 0.05;
         let advice = Advice { request_id: id, maneuver: m, confidence: if nan { f64::NAN } else { conf }, received_at_s: issued + delay };
         let (applied, verdict) = gate(Some(&advice), &log, route, &p, |_| safe);

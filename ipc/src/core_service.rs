@@ -1,0 +1,508 @@
+//! The onboard core process: a fixed-rate loop (iceoryx2 WaitSet interval) that takes the
+//! newest scene, runs the decision core on it, and publishes the decision and an advice request.
+//!
+//! Each tick: drain `scene` (newest wins) and `advice`; check the frame's sequence and codes;
+//! step the core (which checks every number); publish `decision` and, every
+//! `request_every` decisions, `advice_request`. With no valid scene for `staleness_s`, every
+//! tick publishes the minimum-risk fallback. Nothing on this path allocates: ports, buffers and
+//! histograms are set up before the loop. Counters and latency percentiles go out on `stats`
+//! every `stats_period_s` and to stderr every `print_period_s` and on exit.
+
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::time::Duration;
+
+use concord_core::scene::SceneErrorKind;
+use concord_core::{Advice, AdviceVerdict, DecisionCore, Maneuver, Params};
+use hdrhistogram::Histogram;
+use iceoryx2::config::Config;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+
+use crate::clock::{now_ns, secs};
+use crate::iox::{self, IpcError};
+use crate::services;
+use crate::system::{apply_realtime, Notifier, RealtimeConfig};
+use crate::wire::{
+    AdviceRequest, CoreStats, FrameReject, Percentiles, SceneFrame, WireAdvice, WireDecision,
+};
+
+/// Which built-in geometry the core uses.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Geometry {
+    #[default]
+    PaperIntersection,
+    Merge,
+}
+
+impl Geometry {
+    pub fn morphology(self) -> concord_core::Morphology {
+        use concord_core::scene::BuiltIn;
+        concord_core::Morphology::built_in(match self {
+            Geometry::PaperIntersection => BuiltIn::PaperIntersection,
+            Geometry::Merge => BuiltIn::Merge,
+        })
+    }
+}
+
+/// Loop settings of the core process.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ServiceConfig {
+    /// Prefix of every service name.
+    pub prefix: String,
+    /// Loop rate, Hz.
+    pub rate_hz: f64,
+    /// After this long without a valid scene the minimum-risk fallback applies, s.
+    pub staleness_s: f64,
+    /// Issue an advice request with every n-th decision (0: never).
+    pub request_every: u32,
+    /// Period of `stats` messages, s.
+    pub stats_period_s: f64,
+    /// Period of the statistics line on stderr, s (0: only on exit).
+    pub print_period_s: f64,
+    /// Geometry of the road.
+    pub geometry: Geometry,
+}
+
+impl Default for ServiceConfig {
+    fn default() -> Self {
+        ServiceConfig {
+            prefix: services::DEFAULT_PREFIX.into(),
+            rate_hz: 20.0,
+            staleness_s: 0.3,
+            request_every: 1,
+            stats_period_s: 1.0,
+            print_period_s: 10.0,
+            geometry: Geometry::PaperIntersection,
+        }
+    }
+}
+
+/// The whole configuration file of `concord run` (`deploy/concord.toml`).
+#[derive(Debug, Clone, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RunConfig {
+    pub service: ServiceConfig,
+    pub realtime: RealtimeConfig,
+    /// Parameters of the decision core.
+    pub core: Params,
+}
+
+impl RunConfig {
+    /// Checks what the loop and the core rely on.
+    pub fn validate(&self) -> Result<(), String> {
+        let s = &self.service;
+        if !(s.rate_hz.is_finite() && (0.5..=1000.0).contains(&s.rate_hz)) {
+            return Err(format!(
+                "service.rate_hz = {}: expected 0.5 to 1000 Hz",
+                s.rate_hz
+            ));
+        }
+        if !(s.staleness_s.is_finite() && s.staleness_s > 0.0) {
+            return Err("service.staleness_s must be > 0".into());
+        }
+        if !(s.stats_period_s.is_finite()
+            && s.stats_period_s > 0.0
+            && s.print_period_s.is_finite()
+            && s.print_period_s >= 0.0)
+        {
+            return Err("service.stats_period_s must be > 0 and print_period_s >= 0".into());
+        }
+        self.core.validate().map_err(|e| format!("core: {e}"))
+    }
+}
+
+/// When the loop ends, besides SIGINT and SIGTERM.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct StopAfter {
+    pub ticks: Option<u64>,
+    pub duration_s: Option<f64>,
+}
+
+/// Latency histogram in ns (1 µs to 10 s, 3 significant digits); allocated once.
+struct Latency(Histogram<u64>);
+
+impl Latency {
+    fn new() -> Self {
+        Latency(
+            Histogram::new_with_bounds(1_000, 10_000_000_000, 3).expect("valid histogram bounds"),
+        )
+    }
+    fn record(&mut self, ns: u64) {
+        self.0.saturating_record(ns.max(1_000));
+    }
+    fn percentiles(&self) -> Percentiles {
+        if self.0.is_empty() {
+            return [0; 5];
+        }
+        let q = |q: f64| self.0.value_at_quantile(q);
+        [q(0.5), q(0.9), q(0.99), q(0.999), self.0.max()]
+    }
+}
+
+struct Ports {
+    scene: Subscriber<ipc::Service, SceneFrame, ()>,
+    advice: Subscriber<ipc::Service, WireAdvice, ()>,
+    decision: Publisher<ipc::Service, WireDecision, ()>,
+    request: Publisher<ipc::Service, AdviceRequest, ()>,
+    stats: Publisher<ipc::Service, CoreStats, ()>,
+}
+
+struct Loop<'a> {
+    core: &'a mut DecisionCore,
+    cfg: &'a ServiceConfig,
+    ports: Ports,
+    notifier: Notifier,
+    stats: CoreStats,
+    cycle: Latency,
+    scene_age: Latency,
+    decide: Latency,
+    started_ns: u64,
+    period_ns: u64,
+    prev_tick_ns: u64,
+    last_stats_ns: u64,
+    last_print_ns: u64,
+    last_watchdog_ns: u64,
+    /// (sequence, stamp) of the last frame that passed the sequence checks.
+    last_frame: Option<(u64, u64)>,
+    last_valid_rx_ns: Option<u64>,
+    last_sequence: u64,
+    last_stamp_ns: u64,
+    advice: Option<Advice>,
+    advice_unjudged: bool,
+    decisions_since_request: u32,
+    publish_failures: u64,
+}
+
+/// Runs the core loop until SIGINT, SIGTERM or `stop`; returns the final statistics.
+pub fn run(
+    core: &mut DecisionCore,
+    cfg: &ServiceConfig,
+    rt: &RealtimeConfig,
+    iox_config: &Config,
+    stop: StopAfter,
+) -> Result<CoreStats, IpcError> {
+    let cleaned = iox::remove_dead_nodes(iox_config)?;
+    if cleaned > 0 {
+        eprintln!("concord run: removed the resources of {cleaned} dead node(s)");
+    }
+    let node = iox::node("concord-core", iox_config)?;
+    let name = |s| services::name(&cfg.prefix, s);
+    let ports = Ports {
+        scene: iox::subscriber(&node, &name(services::SCENE), 1)?,
+        advice: iox::subscriber(&node, &name(services::ADVICE), 1)?,
+        decision: iox::publisher(&node, &name(services::DECISION))?,
+        request: iox::publisher(&node, &name(services::ADVICE_REQUEST))?,
+        stats: iox::publisher(&node, &name(services::STATS))?,
+    };
+    for refusal in apply_realtime(rt) {
+        eprintln!("concord run: WARNING: {refusal}; the loop runs without it");
+    }
+    let period_ns = (1e9 / cfg.rate_hz) as u64;
+    let now = now_ns();
+    let mut state = Loop {
+        core,
+        cfg,
+        ports,
+        notifier: Notifier::from_env(),
+        stats: CoreStats {
+            period_ns,
+            ..CoreStats::default()
+        },
+        cycle: Latency::new(),
+        scene_age: Latency::new(),
+        decide: Latency::new(),
+        started_ns: now,
+        period_ns,
+        prev_tick_ns: now,
+        last_stats_ns: now,
+        last_print_ns: now,
+        last_watchdog_ns: now,
+        last_frame: None,
+        last_valid_rx_ns: None,
+        last_sequence: 0,
+        last_stamp_ns: 0,
+        advice: None,
+        advice_unjudged: false,
+        decisions_since_request: 0,
+        publish_failures: 0,
+    };
+    let waitset = WaitSetBuilder::new()
+        .create::<ipc::Service>()
+        .map_err(|e| IpcError(format!("creating the WaitSet: {e:?}")))?;
+    let tick = waitset
+        .attach_interval(Duration::from_nanos(period_ns))
+        .map_err(|e| IpcError(format!("attaching the {period_ns} ns interval: {e:?}")))?;
+    state.notifier.ready();
+    let until_ns = stop.duration_s.map(|d| now + (d * 1e9) as u64);
+    let mut failure = None;
+    let result = waitset.wait_and_process(|id| {
+        if id.has_event_from(&tick) {
+            if let Err(e) = state.tick() {
+                failure = Some(e);
+                return CallbackProgression::Stop;
+            }
+        }
+        let done = stop.ticks.is_some_and(|t| state.stats.ticks >= t)
+            || until_ns.is_some_and(|u| now_ns() >= u);
+        if done {
+            CallbackProgression::Stop
+        } else {
+            CallbackProgression::Continue
+        }
+    });
+    state.notifier.stopping();
+    state.publish_stats(now_ns());
+    let mut line = String::new();
+    render_stats(&state.stats, &mut line);
+    eprintln!("concord run: final: {line}");
+    if state.publish_failures > 0 {
+        eprintln!("concord run: {} publish failures", state.publish_failures);
+    }
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    result.map_err(|e| IpcError(format!("WaitSet: {e:?}")))?;
+    Ok(state.stats)
+}
+
+impl Loop<'_> {
+    fn tick(&mut self) -> Result<(), IpcError> {
+        let t0 = now_ns();
+        self.stats.ticks += 1;
+        let late = t0.saturating_sub(self.prev_tick_ns) > self.period_ns + self.period_ns / 2
+            && self.stats.ticks > 1;
+        self.prev_tick_ns = t0;
+
+        let (advice, n) = iox::newest(&self.ports.advice)?;
+        self.stats.advice_received += n;
+        if let Some(a) = advice {
+            self.take_advice(&a, t0);
+        }
+        let (frame, n) = iox::newest(&self.ports.scene)?;
+        self.stats.frames_received += n;
+        match frame {
+            Some(f) => self.decide_on(&f, t0),
+            None => self.check_staleness(t0),
+        }
+
+        let t1 = now_ns();
+        let work = t1 - t0;
+        self.cycle.record(work);
+        if late || work > self.period_ns {
+            self.stats.missed_deadlines += 1;
+        }
+        if t1 - self.last_stats_ns >= (self.cfg.stats_period_s * 1e9) as u64 {
+            self.publish_stats(t1);
+        }
+        if self.cfg.print_period_s > 0.0
+            && t1 - self.last_print_ns >= (self.cfg.print_period_s * 1e9) as u64
+        {
+            self.last_print_ns = t1;
+            print_stats(&self.stats);
+        }
+        if let Some(interval) = self.notifier.watchdog_interval_ns {
+            if t1 - self.last_watchdog_ns >= interval {
+                self.last_watchdog_ns = t1;
+                self.notifier.watchdog();
+            }
+        }
+        Ok(())
+    }
+
+    fn take_advice(&mut self, a: &WireAdvice, now: u64) {
+        if a.valid == 0 {
+            self.stats.advice_verdicts[AdviceVerdict::NoAdvice as usize] += 1;
+            return;
+        }
+        match Maneuver::try_from(a.maneuver) {
+            Ok(maneuver) => {
+                self.advice = Some(Advice {
+                    request_id: a.request_id,
+                    maneuver,
+                    confidence: a.confidence,
+                    received_at_s: secs(now),
+                });
+                self.advice_unjudged = true;
+            }
+            Err(_) => self.stats.advice_verdicts[AdviceVerdict::Malformed as usize] += 1,
+        }
+    }
+
+    fn reject(&mut self, why: FrameReject) {
+        self.stats.frames_rejected[why as usize] += 1;
+    }
+
+    fn decide_on(&mut self, f: &SceneFrame, rx: u64) {
+        self.scene_age.record(rx.saturating_sub(f.stamp_ns));
+        if let Some((seq, stamp)) = self.last_frame {
+            if f.sequence == seq {
+                return self.reject(FrameReject::Duplicate);
+            }
+            if f.sequence < seq {
+                if f.stamp_ns <= stamp {
+                    return self.reject(FrameReject::OutOfOrder);
+                }
+                self.stats.publisher_restarts += 1;
+            }
+        }
+        self.last_frame = Some((f.sequence, f.stamp_ns));
+        let scene = match f.to_scene() {
+            Ok(s) => s,
+            Err(_) => return self.reject(FrameReject::BadCode),
+        };
+        let started = now_ns();
+        let decision = match self.core.step(&scene, secs(started), self.advice.as_ref()) {
+            Ok(d) => d,
+            Err(e) => {
+                return self.reject(match e.kind {
+                    SceneErrorKind::NotFinite => FrameReject::NotFinite,
+                    SceneErrorKind::OutOfRange => FrameReject::OutOfRange,
+                })
+            }
+        };
+        let compute = now_ns() - started;
+        self.stats.frames_accepted += 1;
+        self.last_valid_rx_ns = Some(rx);
+        self.last_sequence = f.sequence;
+        self.last_stamp_ns = f.stamp_ns;
+        if self.advice_unjudged {
+            self.stats.advice_verdicts[decision.advice as usize] += 1;
+            self.advice_unjudged = false;
+        }
+        self.publish_decision(&decision, compute);
+        self.decide.record(now_ns() - rx);
+        self.decisions_since_request += 1;
+        if self.cfg.request_every > 0 && self.decisions_since_request >= self.cfg.request_every {
+            self.decisions_since_request = 0;
+            let issued = secs(started);
+            let deadline = issued + self.core.params().advice.deadline_s;
+            let opm = self.core.params().opm;
+            let route = self.core.morphology().lane(scene.ego_lane).turn as u8;
+            let request = AdviceRequest::from_core(
+                decision.cycle,
+                f.sequence,
+                started,
+                (deadline * 1e9) as u64,
+                &decision,
+                self.core.triplet(),
+                |c| c.is_risky(&opm),
+                route,
+            );
+            if iox::send(&self.ports.request, &request).is_err() {
+                self.publish_failures += 1;
+            }
+            self.stats.advice_requests += 1;
+        }
+    }
+
+    fn check_staleness(&mut self, now: u64) {
+        let Some(rx) = self.last_valid_rx_ns else {
+            return;
+        };
+        if now - rx < (self.cfg.staleness_s * 1e9) as u64 {
+            return;
+        }
+        let started = now_ns();
+        if let Some(d) = self.core.stale_fallback(secs(started)) {
+            let compute = now_ns() - started;
+            self.publish_decision(&d, compute);
+        }
+    }
+
+    fn publish_decision(&mut self, d: &concord_core::Decision, compute_ns: u64) {
+        self.stats.decisions[d.source as usize] += 1;
+        self.stats.fallbacks[d.fallback as usize] += 1;
+        let wire = WireDecision::from_decision(
+            d,
+            self.last_sequence,
+            self.last_stamp_ns,
+            now_ns(),
+            compute_ns,
+        );
+        if iox::send(&self.ports.decision, &wire).is_err() {
+            self.publish_failures += 1;
+        }
+    }
+
+    fn publish_stats(&mut self, now: u64) {
+        self.last_stats_ns = now;
+        self.stats.stamp_ns = now;
+        self.stats.uptime_ns = now - self.started_ns;
+        self.stats.cycle_ns = self.cycle.percentiles();
+        self.stats.scene_age_ns = self.scene_age.percentiles();
+        self.stats.decide_ns = self.decide.percentiles();
+        if iox::send(&self.ports.stats, &self.stats).is_err() {
+            self.publish_failures += 1;
+        }
+    }
+}
+
+/// A fixed buffer that `write!` fills without allocating; text past its end is dropped.
+struct LineBuf {
+    buf: [u8; 1024],
+    len: usize,
+}
+
+impl std::fmt::Write for LineBuf {
+    fn write_str(&mut self, s: &str) -> std::fmt::Result {
+        let n = s.len().min(self.buf.len() - self.len);
+        self.buf[self.len..self.len + n].copy_from_slice(&s.as_bytes()[..n]);
+        self.len += n;
+        Ok(())
+    }
+}
+
+/// Prints one statistics line to stderr without allocating.
+fn print_stats(stats: &CoreStats) {
+    let mut line = LineBuf {
+        buf: [0; 1024],
+        len: 0,
+    };
+    let _ = line.write_str("concord run: ");
+    render_stats(stats, &mut line);
+    let _ = line.write_str("\n");
+    let _ = std::io::stderr().write_all(&line.buf[..line.len]);
+}
+
+/// One-line summary of `stats`: counters and latency percentiles.
+pub fn render_stats(s: &CoreStats, out: &mut impl std::fmt::Write) {
+    let us = |p: &Percentiles| [p[0] / 1000, p[2] / 1000, p[3] / 1000, p[4] / 1000];
+    let c = us(&s.cycle_ns);
+    let a = us(&s.scene_age_ns);
+    let _ = write!(
+        out,
+        "{:.0} s, {} ticks, {} missed | frames {} in, {} decided, rejected",
+        secs(s.uptime_ns),
+        s.ticks,
+        s.missed_deadlines,
+        s.frames_received,
+        s.frames_accepted
+    );
+    for r in FrameReject::ALL {
+        let _ = write!(out, " {}={}", r.name(), s.frames_rejected[r as usize]);
+    }
+    let _ = write!(
+        out,
+        ", restarts {} | decisions logit={} advice={} minimum_risk={} (stale {}) | advice {} in:",
+        s.publisher_restarts,
+        s.decisions[0],
+        s.decisions[1],
+        s.decisions[2],
+        s.fallbacks[2],
+        s.advice_received
+    );
+    for v in AdviceVerdict::ALL {
+        if s.advice_verdicts[v as usize] > 0 {
+            let _ = write!(out, " {}={}", v.name(), s.advice_verdicts[v as usize]);
+        }
+    }
+    let _ = write!(
+        out,
+        " | cycle µs p50 {} p99 {} p99.9 {} max {} | scene age µs p50 {} p99 {} max {}",
+        c[0], c[1], c[2], c[3], a[0], a[1], a[3]
+    );
+}

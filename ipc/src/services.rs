@@ -1,0 +1,28 @@
+//! Service names. Every service lives under a prefix, `concord/` by default; tests and
+//! parallel deployments choose their own (`--prefix`), so their services never meet.
+//!
+//! | service | payload | publisher | subscribers |
+//! |---|---|---|---|
+//! | `scene` | [`SceneFrame`](crate::wire::SceneFrame) | perception, `concord feed`, simulator bridges | core |
+//! | `decision` | [`WireDecision`](crate::wire::WireDecision) | core | controller, monitor, sidecar (eHMI) |
+//! | `advice_request` | [`AdviceRequest`](crate::wire::AdviceRequest) | core | sidecar |
+//! | `advice` | [`WireAdvice`](crate::wire::WireAdvice) | sidecar | core |
+//! | `intent_text` | [`IntentText`](crate::wire::IntentText) | eHMI input, passenger UI | sidecar |
+//! | `ehmi` | [`EhmiMessage`](crate::wire::EhmiMessage) | sidecar | eHMI display, monitor |
+//! | `stats` | [`CoreStats`](crate::wire::CoreStats) | core | monitor |
+
+/// Default prefix.
+pub const DEFAULT_PREFIX: &str = "concord/";
+
+pub const SCENE: &str = "scene";
+pub const DECISION: &str = "decision";
+pub const ADVICE_REQUEST: &str = "advice_request";
+pub const ADVICE: &str = "advice";
+pub const INTENT_TEXT: &str = "intent_text";
+pub const EHMI: &str = "ehmi";
+pub const STATS: &str = "stats";
+
+/// Full service name of `service` under `prefix`.
+pub fn name(prefix: &str, service: &str) -> String {
+    format!("{prefix}{service}")
+}
