@@ -23,7 +23,7 @@ step "benchmarks run once each (criterion --test)"
 cargo bench -p concord-bench --bench core_step -- --test
 
 step "the demo completes the paper's left turn"
-cargo run --release --quiet -- demo --speed 8 | tail -n 2 | tee /dev/stderr | grep -q "turn completed"
+cargo run --release --quiet -- demo --speed 8 | tee /dev/stderr | grep -q "^outcome: turn completed"
 
 step "the core is no_std without alloc"
 grep -q '^#!\[no_std\]' core/src/lib.rs

@@ -284,6 +284,7 @@ impl Loop<'_> {
         }
         let (frame, n) = iox::newest(&self.ports.scene)?;
         self.stats.frames_received += n;
+        self.stats.frames_superseded += n.saturating_sub(1);
         match frame {
             Some(f) => self.decide_on(&f, t0),
             None => self.check_staleness(t0),
@@ -475,11 +476,12 @@ pub fn render_stats(s: &CoreStats, out: &mut impl std::fmt::Write) {
     let a = us(&s.scene_age_ns);
     let _ = write!(
         out,
-        "{:.0} s, {} ticks, {} missed | frames {} in, {} decided, rejected",
+        "{:.0} s, {} ticks, {} missed | frames {} in, {} superseded, {} decided, rejected",
         secs(s.uptime_ns),
         s.ticks,
         s.missed_deadlines,
         s.frames_received,
+        s.frames_superseded,
         s.frames_accepted
     );
     for r in FrameReject::ALL {

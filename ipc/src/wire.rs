@@ -718,6 +718,8 @@ pub struct CoreStats {
     pub missed_deadlines: u64,
     /// Samples taken from `scene` (including those superseded within a tick).
     pub frames_received: u64,
+    /// Frames replaced by a newer one before the core looked at them (newest wins).
+    pub frames_superseded: u64,
     /// Frames the core decided on.
     pub frames_accepted: u64,
     /// Frames rejected, by [`FrameReject`] code.
