@@ -16,11 +16,18 @@ step "tests (cargo test --workspace)"
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 cargo test --workspace 2>&1 | tee "$log"
+
+step "Python bridge: wire mirror layout and interop with a running core (unittest)"
+python=$(bridges/python/setup.sh)
+(cd bridges/python && "$python" -m unittest -v test_wire_layout test_interop) 2>&1 | tee -a "$log"
+
 passed=$(grep -o '[0-9]* passed' "$log" | awk '{s += $1} END {print s + 0}')
 failed=$(grep -o '[0-9]* failed' "$log" | awk '{s += $1} END {print s + 0}')
+ran=$(grep -o '^Ran [0-9]* test' "$log" | awk '{s += $2} END {print s + 0}')
+passed=$((passed + ran))
 
 step "benchmarks run once each (criterion --test)"
-cargo bench -p concord-bench --bench core_step -- --test
+cargo bench -p concord-bench --benches -- --test
 
 step "the demo completes the paper's left turn"
 cargo run --release --quiet -- demo --speed 8 | tee /dev/stderr | grep -q "^outcome: turn completed"

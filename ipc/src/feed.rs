@@ -404,11 +404,9 @@ pub fn run(cfg: &FeedConfig, iox_config: &Config) -> Result<FeedSummary, IpcErro
                     }
                     Fault::Reorder => {
                         if let Some(p) = previous {
-                            let older = SceneFrame {
-                                sequence: p.sequence.saturating_sub(1),
-                                stamp_ns: p.stamp_ns - 1,
-                                ..p
-                            };
+                            let mut older = p;
+                            older.sequence = p.sequence.saturating_sub(1);
+                            older.stamp_ns = p.stamp_ns - 1;
                             iox::send(&publisher, &older)?;
                         }
                         continue;

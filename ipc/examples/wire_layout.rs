@@ -1,0 +1,182 @@
+//! Prints the size, alignment, type name and field offsets of every wire type as JSON, for the
+//! layout test of the Python mirror (`bridges/python/test_wire_layout.py`).
+
+use concord_ipc::wire::*;
+use iceoryx2::prelude::ZeroCopySend;
+use std::mem::{align_of, offset_of, size_of};
+
+macro_rules! layout {
+    ($ty:ty { $($field:ident),+ $(,)? }) => {{
+        let fields: Vec<String> = vec![$(format!("\"{}\": {}", stringify!($field), offset_of!($ty, $field))),+];
+        // SAFETY: type_name only reads the name given to the derive.
+        let name = unsafe { <$ty as ZeroCopySend>::type_name() };
+        format!(
+            "\"{}\": {{\"type_name\": \"{}\", \"size\": {}, \"align\": {}, \"fields\": {{{}}}}}",
+            stringify!($ty), name, size_of::<$ty>(), align_of::<$ty>(), fields.join(", ")
+        )
+    }};
+}
+
+fn main() {
+    let entries = [
+        layout!(WireIntent {
+            style_confidence,
+            action_confidence,
+            task_confidence,
+            style,
+            action,
+            task,
+            reserved
+        }),
+        layout!(WireAgent {
+            x,
+            y,
+            vx,
+            vy,
+            ax,
+            ay,
+            heading,
+            intent,
+            id,
+            kind,
+            turn_signal,
+            valid,
+            reserved
+        }),
+        layout!(SceneFrame {
+            sequence,
+            stamp_ns,
+            ego,
+            agents,
+            ego_route_lane,
+            reserved
+        }),
+        layout!(WirePoint {
+            t,
+            x,
+            y,
+            heading,
+            speed,
+            accel
+        }),
+        layout!(WireDecision {
+            scene_sequence,
+            cycle,
+            scene_stamp_ns,
+            decided_ns,
+            compute_ns,
+            p_logit,
+            p_corrected,
+            trajectory,
+            n_points,
+            maneuver,
+            logit_maneuver,
+            source,
+            advice,
+            fallback,
+            reserved
+        }),
+        layout!(WireProcess {
+            dist_to_stop_m,
+            speed_mps,
+            accel_mps2,
+            theta_v,
+            theta_a,
+            s_m,
+            l_m,
+            lane,
+            reserved
+        }),
+        layout!(WireConflict {
+            x,
+            y,
+            ego_dist_m,
+            agent_dist_m,
+            ego_ttc_s,
+            agent_ttc_s,
+            delta_ttc_s,
+            agent_id,
+            risky,
+            reserved
+        }),
+        layout!(WireObject {
+            state,
+            process,
+            longitudinal_m,
+            saliency,
+            conflict,
+            reserved
+        }),
+        layout!(AdviceRequest {
+            request_id,
+            scene_sequence,
+            issued_ns,
+            deadline_ns,
+            p_logit,
+            p_corrected,
+            ego,
+            ego_intent,
+            objects,
+            conflicts,
+            leader_gap_m,
+            leader_speed_mps,
+            route_turn,
+            n_objects,
+            n_conflicts,
+            reserved
+        }),
+        layout!(WireAgentIntent {
+            intent,
+            agent_id,
+            reserved
+        }),
+        layout!(WireAdvice {
+            request_id,
+            created_ns,
+            confidence,
+            ego_intent,
+            agent_intents,
+            maneuver,
+            valid,
+            n_agent_intents,
+            reserved
+        }),
+        layout!(IntentText {
+            stamp_ns,
+            source_id,
+            len,
+            source,
+            reserved,
+            text
+        }),
+        layout!(EhmiMessage {
+            decision_cycle,
+            stamp_ns,
+            len,
+            maneuver,
+            reserved,
+            text
+        }),
+        layout!(CoreStats {
+            stamp_ns,
+            uptime_ns,
+            period_ns,
+            ticks,
+            missed_deadlines,
+            frames_received,
+            frames_superseded,
+            frames_accepted,
+            frames_rejected,
+            publisher_restarts,
+            decisions,
+            fallbacks,
+            advice_requests,
+            advice_received,
+            advice_verdicts,
+            cycle_ns,
+            scene_age_ns,
+            decide_ns
+        }),
+    ];
+    println!("{{{}}}", entries.join(",\n"));
+}
