@@ -4,8 +4,10 @@
 //! Each tick: drain `scene` (newest wins) and `advice`; check the frame's sequence and codes;
 //! step the core (which checks every number); publish `decision` and, every
 //! `request_every` decisions, `advice_request`. With no valid scene for `staleness_s`, every
-//! tick publishes the minimum-risk fallback. Nothing on this path allocates: ports, buffers and
-//! histograms are set up before the loop. Counters and latency percentiles go out on `stats`
+//! tick publishes the minimum-risk fallback. Concord's code on this path does not allocate:
+//! ports, buffers and histograms are set up before the loop (iceoryx2 0.10 itself allocates a
+//! 48-byte state per loaned sample; `ipc/tests/loop_allocations.rs`). Counters and latency
+//! percentiles go out on `stats`
 //! every `stats_period_s` and to stderr every `print_period_s` and on exit.
 
 use std::fmt::Write as _;
@@ -185,6 +187,18 @@ pub fn run(
     iox_config: &Config,
     stop: StopAfter,
 ) -> Result<CoreStats, IpcError> {
+    run_observed(core, cfg, rt, iox_config, stop, |_| {})
+}
+
+/// [`run`], calling `observe` with the counters after every tick (on the loop thread).
+pub fn run_observed(
+    core: &mut DecisionCore,
+    cfg: &ServiceConfig,
+    rt: &RealtimeConfig,
+    iox_config: &Config,
+    stop: StopAfter,
+    mut observe: impl FnMut(&CoreStats),
+) -> Result<CoreStats, IpcError> {
     let cleaned = iox::remove_dead_nodes(iox_config)?;
     if cleaned > 0 {
         eprintln!("concord run: removed the resources of {cleaned} dead node(s)");
@@ -245,6 +259,7 @@ pub fn run(
                 failure = Some(e);
                 return CallbackProgression::Stop;
             }
+            observe(&state.stats);
         }
         let done = stop.ticks.is_some_and(|t| state.stats.ticks >= t)
             || until_ns.is_some_and(|u| now_ns() >= u);
