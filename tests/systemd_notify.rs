@@ -15,7 +15,9 @@ fn ready_watchdog_and_stopping_are_notified() {
     let path = dir.join("notify.sock");
     let _ = std::fs::remove_file(&path);
     let socket = UnixDatagram::bind(&path).expect("notify socket");
-    socket.set_read_timeout(Some(Duration::from_millis(200))).expect("timeout");
+    socket
+        .set_read_timeout(Some(Duration::from_millis(200)))
+        .expect("timeout");
     let prefix = format!("notify-{}/", std::process::id());
     let mut core = Command::new(CONCORD)
         .args(["run", "--prefix", &prefix, "--rate", "50"])
@@ -40,9 +42,17 @@ fn ready_watchdog_and_stopping_are_notified() {
     }
     let _ = std::fs::remove_dir_all(&dir);
     assert!(status.success(), "concord run failed on SIGTERM");
-    assert_eq!(messages.first().map(String::as_str), Some("READY=1"), "{messages:?}");
+    assert_eq!(
+        messages.first().map(String::as_str),
+        Some("READY=1"),
+        "{messages:?}"
+    );
     let pings = messages.iter().filter(|m| *m == "WATCHDOG=1").count();
     // 0.1 s ping interval for about 2.5 s of running.
     assert!(pings >= 10, "only {pings} watchdog pings: {messages:?}");
-    assert_eq!(messages.last().map(String::as_str), Some("STOPPING=1"), "{messages:?}");
+    assert_eq!(
+        messages.last().map(String::as_str),
+        Some("STOPPING=1"),
+        "{messages:?}"
+    );
 }
