@@ -57,8 +57,7 @@ fn monitor_reads_counters_and_the_last_decision_of_a_running_core() {
     let text = String::from_utf8(out.stdout).expect("UTF-8 output");
     let last = text
         .lines()
-        .filter(|l| l.starts_with("core: "))
-        .last()
+        .rfind(|l| l.starts_with("core: "))
         .expect("a core line");
     assert!(
         last.contains(" decided,") && last.contains("cycle µs p50"),
