@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use concord_core::DecisionCore;
-use concord_ipc::core_service::{self, RunConfig, StopAfter};
+use concord_ipc::core_service::{self, Geometry, RunConfig, StopAfter};
 use concord_ipc::feed::{self, Fault, FeedConfig, Scenario};
 use concord_ipc::wire::{CoreStats, EhmiMessage, WireDecision};
 use concord_ipc::{clock, iox, monitor, services};
@@ -33,6 +33,27 @@ enum ScenarioArg {
     Dense,
 }
 
+/// Built-in road geometries of `concord run --geometry`.
+#[derive(Clone, Copy, ValueEnum)]
+enum GeometryArg {
+    /// The paper's intersection (lanes at ±5 m around the origin).
+    PaperIntersection,
+    /// The on-ramp merge.
+    Merge,
+    /// highway-env's intersection-v0, in its coordinates (bridges/python/highway_bridge.py).
+    HighwayEnvIntersection,
+}
+
+impl GeometryArg {
+    fn geometry(self) -> Geometry {
+        match self {
+            GeometryArg::PaperIntersection => Geometry::PaperIntersection,
+            GeometryArg::Merge => Geometry::Merge,
+            GeometryArg::HighwayEnvIntersection => Geometry::HighwayEnvIntersection,
+        }
+    }
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Run the paper's left turn across processes: feed, core and a console; ends with a summary.
@@ -55,6 +76,9 @@ enum Command {
         /// Loop rate, Hz, overriding the file's.
         #[arg(long)]
         rate: Option<f64>,
+        /// Road geometry, overriding the file's `service.geometry`.
+        #[arg(long, value_enum)]
+        geometry: Option<GeometryArg>,
         /// Stop after this many seconds (default: run until SIGINT/SIGTERM).
         #[arg(long)]
         duration: Option<f64>,
@@ -124,11 +148,13 @@ fn main() -> ExitCode {
             config,
             prefix,
             rate,
+            geometry,
             duration,
         } => run(
             config.as_deref(),
             prefix,
             rate,
+            geometry.map(GeometryArg::geometry),
             duration,
             iox_path.as_deref(),
         ),
@@ -233,6 +259,7 @@ fn run(
     config: Option<&Path>,
     prefix: Option<String>,
     rate: Option<f64>,
+    geometry: Option<Geometry>,
     duration: Option<f64>,
     iox_path: Option<&Path>,
 ) -> Result<(), String> {
@@ -243,6 +270,9 @@ fn run(
     if let Some(r) = rate {
         cfg.service.rate_hz = r;
     }
+    if let Some(g) = geometry {
+        cfg.service.geometry = g;
+    }
     cfg.validate()?;
     let iox_config = iox::init(iox_path).map_err(|e| e.to_string())?;
     let mut core = Box::new(
@@ -250,9 +280,10 @@ fn run(
             .map_err(|e| e.to_string())?,
     );
     eprintln!(
-        "concord run: {} Hz on {}*, {} samples, staleness {} s",
+        "concord run: {} Hz on {}*, geometry {:?}, {} samples, staleness {} s",
         cfg.service.rate_hz,
         cfg.service.prefix,
+        cfg.service.geometry,
         cfg.core.trajectory.samples,
         cfg.service.staleness_s
     );

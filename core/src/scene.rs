@@ -680,6 +680,10 @@ pub enum BuiltIn {
     PaperIntersection,
     /// A single-lane on-ramp merging into a main lane (§6, Fig. 7).
     Merge,
+    /// highway-env's `intersection-v0` (version 1.12.1) in its own coordinates: the ego's
+    /// unprotected left turn from the south approach and every lane that crosses or joins it.
+    /// See [`highway_env_intersection`].
+    HighwayEnvIntersection,
 }
 
 /// Lane indices of [`BuiltIn::PaperIntersection`].
@@ -708,6 +712,59 @@ pub mod merge {
     pub const MAIN: u8 = 0;
     /// On-ramp from (−150, −12), joining the main lane at the origin: the CAV's route.
     pub const RAMP: u8 = 1;
+}
+
+/// Lane indices and dimensions of [`BuiltIn::HighwayEnvIntersection`].
+///
+/// highway-env (1.12.1, `IntersectionEnv._make_road`) builds a four-way junction of 4 m lanes
+/// centred at the origin: each approach is 100 m long and ends 11 m from the centre, right
+/// turns have radius 9 m and left turns 13 m, and traffic keeps right as drawn on screen.
+/// The lanes here are in highway-env's own coordinates, so observations pass through
+/// unchanged: x to the east, y to the *south* (the renderer draws y downwards), headings
+/// `atan2(vy, vx)` in that frame. Since that frame is a mirror image of a counter-clockwise
+/// one, a turn that a driver makes to the left is a clockwise (negative) sweep in numbers;
+/// [`Turn`] labels are the driver's. Approaches are named by where they come from:
+/// highway-env's node suffixes 0 = south, 1 = west, 2 = north, 3 = east.
+///
+/// The ego enters from the south (`o0`, x = 2, driving towards −y) and turns left to the west
+/// exit (`il1 → o1`, y = −2, driving towards −x): the default `destination = "o1"`. Of the
+/// twelve movements, the six that cross or join that route are lanes here, plus the oncoming
+/// left turn (which passes the ego's turn without crossing it), so that an oncoming car in
+/// the middle of its turn is matched and predicted along its arc. On an approach shared by
+/// several movements, an agent matches the one with the lowest index, so straight movements
+/// come first.
+pub mod highway_env_intersection {
+    /// Lane width, m (`AbstractLane.DEFAULT_WIDTH`).
+    pub const LANE_WIDTH_M: f64 = 4.0;
+    /// Length of each approach lane, m.
+    pub const APPROACH_M: f64 = 100.0;
+    /// Distance from the centre to where approaches end and exits begin, m.
+    pub const OUTER_M: f64 = 11.0;
+    /// Radius of right turns, m.
+    pub const RIGHT_TURN_RADIUS_M: f64 = 9.0;
+    /// Radius of left turns, m.
+    pub const LEFT_TURN_RADIUS_M: f64 = 13.0;
+    /// Lateral offset of each lane centre from the road's axis, m.
+    pub const HALF_LANE_M: f64 = 2.0;
+
+    /// From the south (x = 2, towards −y), turning left to the west exit: the ego's route.
+    pub const EGO_LEFT: u8 = 0;
+    /// From the north (x = −2, towards +y), straight on: oncoming traffic; crosses the turn.
+    pub const NORTH_STRAIGHT: u8 = 1;
+    /// From the north, turning right into the west exit: joins the ego's exit lane.
+    pub const NORTH_RIGHT: u8 = 2;
+    /// From the north, turning left to the east exit: passes the ego's turn without crossing.
+    pub const NORTH_LEFT: u8 = 3;
+    /// From the west (y = 2, towards +x), straight on: priority road; crosses the turn.
+    pub const WEST_STRAIGHT: u8 = 4;
+    /// From the west, turning left to the north exit: crosses the turn.
+    pub const WEST_LEFT: u8 = 5;
+    /// From the east (y = −2, towards −x), straight on: priority road; joins the ego's exit.
+    pub const EAST_STRAIGHT: u8 = 6;
+    /// From the east, turning left to the south exit: crosses the turn.
+    pub const EAST_LEFT: u8 = 7;
+    /// Number of lanes.
+    pub const LANES: usize = 8;
 }
 
 /// Intersection morphology 𝓘 = {P_stop, R_lane, L_ref} (eq. 2) with its conflict points.
@@ -773,6 +830,7 @@ impl Morphology {
                 return Morphology::new(&[merge_main(), merge_ramp()])
                     .expect("built-in merge geometry is valid")
             }
+            BuiltIn::HighwayEnvIntersection => highway_env_intersection_lanes(),
         };
         Morphology::new(&lanes).expect("built-in intersection geometry is valid")
     }
@@ -910,6 +968,80 @@ fn paper_lanes() -> [Lane; 8] {
                 .arc(v(-10.0, -10.0), -FRAC_PI_2, ARC_STEP_M)
                 .line_to(v(-5.0, -40.0)),
             Turn::Right,
+        ),
+    ]
+}
+
+fn highway_env_intersection_lanes() -> [Lane; highway_env_intersection::LANES] {
+    use core::f64::consts::FRAC_PI_2;
+    use highway_env_intersection::*;
+    let v = Vec2::new;
+    let (h, o) = (HALF_LANE_M, OUTER_M);
+    let far = OUTER_M + APPROACH_M;
+    let (r_left, r_right) = (LEFT_TURN_RADIUS_M, RIGHT_TURN_RADIUS_M);
+    // Left-turn centres sit on the far side of the crossing road, right-turn centres at the
+    // near corner: (±(r − 2), ±(r − 2)) = (±11, ±11) for both radii.
+    let (cl, cr) = (r_left - h, r_right + h);
+    // Stop lines where the approaches end (highway-env has none; its junction begins there).
+    let lane = |b: LaneBuilder, turn| {
+        b.build(0.5 * LANE_WIDTH_M, APPROACH_M, turn)
+            .expect("valid built-in lane")
+    };
+    // A driver's left turn is a clockwise (negative) sweep in highway-env's y-down frame.
+    let left = -FRAC_PI_2;
+    let right = FRAC_PI_2;
+    [
+        // EGO_LEFT: o0 → ir0 → il1 → o1.
+        lane(
+            Lane::builder(v(h, far))
+                .line_to(v(h, o))
+                .arc(v(-cl, cl), left, ARC_STEP_M)
+                .line_to(v(-far, -h)),
+            Turn::Left,
+        ),
+        // NORTH_STRAIGHT: o2 → ir2 → il0 → o0.
+        lane(
+            Lane::builder(v(-h, -far)).line_to(v(-h, far)),
+            Turn::Straight,
+        ),
+        // NORTH_RIGHT: o2 → ir2 → il1 → o1.
+        lane(
+            Lane::builder(v(-h, -far))
+                .line_to(v(-h, -o))
+                .arc(v(-cr, -cr), right, ARC_STEP_M)
+                .line_to(v(-far, -h)),
+            Turn::Right,
+        ),
+        // NORTH_LEFT: o2 → ir2 → il3 → o3.
+        lane(
+            Lane::builder(v(-h, -far))
+                .line_to(v(-h, -o))
+                .arc(v(cl, -cl), left, ARC_STEP_M)
+                .line_to(v(far, h)),
+            Turn::Left,
+        ),
+        // WEST_STRAIGHT: o1 → ir1 → il3 → o3.
+        lane(Lane::builder(v(-far, h)).line_to(v(far, h)), Turn::Straight),
+        // WEST_LEFT: o1 → ir1 → il2 → o2.
+        lane(
+            Lane::builder(v(-far, h))
+                .line_to(v(-o, h))
+                .arc(v(-cl, -cl), left, ARC_STEP_M)
+                .line_to(v(h, -far)),
+            Turn::Left,
+        ),
+        // EAST_STRAIGHT: o3 → ir3 → il1 → o1.
+        lane(
+            Lane::builder(v(far, -h)).line_to(v(-far, -h)),
+            Turn::Straight,
+        ),
+        // EAST_LEFT: o3 → ir3 → il0 → o0.
+        lane(
+            Lane::builder(v(far, -h))
+                .line_to(v(o, -h))
+                .arc(v(cl, cl), left, ARC_STEP_M)
+                .line_to(v(-h, far)),
+            Turn::Left,
         ),
     ]
 }

@@ -37,6 +37,8 @@ pub enum Geometry {
     #[default]
     PaperIntersection,
     Merge,
+    /// highway-env's `intersection-v0`, in its coordinates (`bridges/python/highway_bridge.py`).
+    HighwayEnvIntersection,
 }
 
 impl Geometry {
@@ -45,6 +47,7 @@ impl Geometry {
         concord_core::Morphology::built_in(match self {
             Geometry::PaperIntersection => BuiltIn::PaperIntersection,
             Geometry::Merge => BuiltIn::Merge,
+            Geometry::HighwayEnvIntersection => BuiltIn::HighwayEnvIntersection,
         })
     }
 }

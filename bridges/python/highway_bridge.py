@@ -1,0 +1,574 @@
+"""Drive Concord in lock-step with highway-env (1.12.1) and report collisions, success and speed.
+
+    python highway_bridge.py --env intersection-v0 --seeds 50                  # Concord
+    python highway_bridge.py --env intersection-v0 --seeds 50 --policy idle   # a baseline
+
+For ``--policy concord`` the bridge starts ``concord run --geometry highway-env-intersection``
+under a private service prefix and, for every environment step: turns the observation into a
+``SceneFrame`` (the ego and up to 32 tracked vehicles, in highway-env's own coordinates, which
+the built-in geometry uses), publishes it over iceoryx2, waits for the decision answering that
+frame's sequence number (the simulation does not advance until it arrives; after
+``--timeout`` seconds the episode is abandoned and counted as a failure), follows the decision's
+trajectory for one policy period and steps the environment.
+
+Following the trajectory. highway-env's ``ContinuousAction`` without steering drives straight
+ahead (its steering is hard-wired to 0), so a left turn cannot be driven longitudinally only;
+``DiscreteMetaAction`` steers along the route but moves its speed set-point one step per action
+(at most ~1.7 m/s² per step with a fine grid of set-points), too coarse to follow a plan. The
+bridge therefore uses ``ContinuousAction`` with both axes: the acceleration of the planned
+change of speed over one policy period, and the steering of the constant-steering arc from the
+ego's pose to the planned position ``--lookahead`` seconds ahead (pure pursuit solved for the
+bicycle model's slip angle). Both are held for the period, as highway-env holds an action.
+highway-env reports velocities along the body heading, ignoring that slip; for the ego the
+bridge knows its steering and reports the true direction of motion, or every plan in a turn
+would start with a phantom outward drift.
+
+Perception. Kinematics observations (absolute x, y, vx, vy, heading of up to 33 vehicles,
+unnormalised, including those behind) carry no identities; a nearest-neighbour tracker with a
+constant-velocity prediction gives each vehicle a stable id. Accelerations of other vehicles
+are sent as 0 unless ``--estimate-accel`` (finite differences of tracked velocities).
+
+Baseline policies (``idle``, ``faster``, ``slower``) send that constant ``DiscreteMetaAction``
+(highway-env's default action space, which steers along the route) and do not need Concord.
+
+Scene time. Frames are stamped with the simulation clock (a fixed monotonic origin plus the
+episode's simulated time), not the wall clock: lock-step runs faster or slower than real time,
+and the core's 10 Hz histories must see simulated seconds. Each episode starts the clock again
+at the origin, which the core takes for a restarted source and clears its histories.
+
+Policy frequency. highway-env attempts one vehicle spawn per environment step with probability
+``spawn_probability`` (0.6). At a policy frequency f other than the default 1 Hz the bridge
+scales it to 0.6 / f, so that traffic arrives at the same mean rate per simulated second; the
+initial traffic of a seed is the same at every frequency. Baselines run with the same settings.
+
+``--trace FILE`` logs one JSON line per decision: the frame, the maneuver, P_n, the commanded
+action and the OPM conflicts of the advice request (for replaying a scene through the core).
+
+Results: per policy, collision rate, success rate (arrived without collision), mean ego speed
+(over all steps of all episodes) and the number of minimum-risk decisions; the last line is a
+one-line summary, and ``--json FILE`` writes every number and each episode's outcome.
+"""
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+sys.path.insert(0, HERE)
+
+import concord_wire as wire  # noqa: E402
+
+# Lane indices of the core's BuiltIn::HighwayEnvIntersection (core/src/scene.rs).
+HWI_EGO_LEFT = 0
+
+
+def intersection_progress(x, y):
+    """Arc length along the ego's left-turn route of intersection-v0 (0 at the far end of the
+    approach, 100 at the junction, ~120.4 where the turn ends, arrival 25 m later)."""
+    if y >= 11.0:
+        return 111.0 - y
+    angle = math.atan2(y - 11.0, x + 11.0)  # on the turn: 0 at its start, -pi/2 at its end
+    if angle > -math.pi / 2 and x > -11.0:
+        return 100.0 + 13.0 * min(-angle, math.pi / 2)
+    return 100.0 + 13.0 * math.pi / 2 + (-11.0 - x)
+
+
+ENVS = {
+    "intersection-v0": {
+        "geometry": "highway-env-intersection",
+        "route_lane": HWI_EGO_LEFT,
+        "progress": intersection_progress,
+    },
+}
+
+DISCRETE = {"slower": 0, "idle": 1, "faster": 2}  # intersection-v0's DiscreteMetaAction
+POLICIES = ("concord",) + tuple(DISCRETE)
+
+# highway-env's kinematic model (vehicle/kinematics.py): length 5 m, slip angle
+# beta = atan(tan(delta) / 2), heading rate = v sin(beta) / (length / 2).
+VEHICLE_LENGTH = 5.0
+ACCEL_RANGE = (-8.0, 4.0)  # m/s²: Concord's emergency braking down to -8, its plans up to +3
+STEERING_RANGE = (-math.pi / 3, math.pi / 3)  # MDPVehicle.MAX_STEERING_ANGLE
+OBSERVED = 33  # the ego and wire.MAX_AGENTS others
+MAX_SPEED = 20.0
+
+
+def env_config(policy, policy_frequency):
+    """highway-env configuration for ``policy`` (only the action type differs between them)."""
+    cfg = {
+        "observation": {
+            "type": "Kinematics",
+            "vehicles_count": OBSERVED,
+            "features": ["presence", "x", "y", "vx", "vy", "heading"],
+            "absolute": True,
+            "normalize": False,
+            "clip": False,
+            "see_behind": True,
+            "order": "sorted",
+            "observe_intentions": False,
+        },
+        "policy_frequency": policy_frequency,
+        "spawn_probability": 0.6 / policy_frequency,
+    }
+    if policy == "concord":
+        cfg["action"] = {
+            "type": "ContinuousAction",
+            "longitudinal": True,
+            "lateral": True,
+            "acceleration_range": list(ACCEL_RANGE),
+            "steering_range": list(STEERING_RANGE),
+            "speed_range": [0.0, MAX_SPEED],
+            "clip": True,
+        }
+    return cfg
+
+
+def wrap(angle):
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+class Tracker:
+    """Stable ids for observed vehicles: each track is predicted one period ahead at constant
+    velocity and greedily matched to the nearest detection within a gate."""
+
+    GATE_M = 4.0
+
+    def __init__(self):
+        self.next_id = 1
+        self.tracks = {}  # id -> (x, y, vx, vy)
+
+    def reset(self):
+        self.tracks = {}
+
+    def update(self, detections, dt):
+        """``detections``: rows (x, y, vx, vy, heading). Returns a list of (id, previous
+        velocity or None) in detection order."""
+        pairs = []
+        for tid, (x, y, vx, vy) in self.tracks.items():
+            px, py = x + vx * dt, y + vy * dt
+            for k, d in enumerate(detections):
+                dist = math.hypot(d[0] - px, d[1] - py)
+                if dist < self.GATE_M + 0.1 * math.hypot(vx, vy):
+                    pairs.append((dist, tid, k))
+        pairs.sort()
+        taken_t, taken_d = set(), {}
+        for _, tid, k in pairs:
+            if tid in taken_t or k in taken_d:
+                continue
+            taken_t.add(tid)
+            taken_d[k] = tid
+        out, tracks = [], {}
+        for k, d in enumerate(detections):
+            tid = taken_d.get(k)
+            prev = None
+            if tid is None:
+                tid = self.next_id
+                self.next_id += 1
+            else:
+                prev = self.tracks[tid][2:]
+            tracks[tid] = (d[0], d[1], d[2], d[3])
+            out.append((tid, prev))
+        self.tracks = tracks
+        return out
+
+
+def _state(a):
+    return [a.id, a.x, a.y, a.vx, a.vy, a.ax, a.ay, a.heading]
+
+
+def wire_agent(x, y, vx, vy, heading, agent_id, ax=0.0, ay=0.0):
+    a = wire.WireAgent()
+    a.x, a.y, a.vx, a.vy, a.ax, a.ay = x, y, vx, vy, ax, ay
+    a.heading = wrap(heading)
+    a.intent = wire.WireIntent.unknown()
+    a.id, a.kind, a.turn_signal, a.valid = agent_id, 0, 0, 1
+    return a
+
+
+def sample(decision, t):
+    """(x, y, heading, speed) of the decision's trajectory ``t`` s ahead (linear in between)."""
+    n = decision.n_points
+    pts = decision.trajectory
+    if n == 0:
+        return None
+    if t <= pts[0].t:
+        p = pts[0]
+        return p.x, p.y, p.heading, p.speed
+    for k in range(1, n):
+        if pts[k].t >= t:
+            a, b = pts[k - 1], pts[k]
+            u = (t - a.t) / max(b.t - a.t, 1e-9)
+            turn = wrap(b.heading - a.heading)
+            return (a.x + (b.x - a.x) * u, a.y + (b.y - a.y) * u, a.heading + turn * u,
+                    a.speed + (b.speed - a.speed) * u)
+    p = pts[n - 1]
+    return p.x, p.y, p.heading, p.speed
+
+
+def follow(decision, x, y, heading, speed, period, lookahead):
+    """Acceleration (m/s²) and steering (rad) that follow ``decision`` for one ``period``."""
+    start, target = sample(decision, 0.0), sample(decision, period)
+    if target is None:
+        return ACCEL_RANGE[0], 0.0
+    # The planned change of speed, not the gap to the planned speed: the plan's speed is
+    # along the lane (Frenet ds), which is below the ego's speed whenever its course differs
+    # from the lane's, and at short periods that gap would read as hard braking.
+    accel = (target[3] - start[3]) / period
+    accel = max(accel, -speed / period)  # stop at 0, never reverse
+    accel = min(max(accel, ACCEL_RANGE[0]), ACCEL_RANGE[1])
+    aim = sample(decision, max(period, lookahead))
+    dx, dy = aim[0] - x, aim[1] - y
+    dist = math.hypot(dx, dy)
+    steering = 0.0
+    if dist > 0.5:
+        steering = math.atan(2.0 * math.tan(pursuit_slip(math.atan2(dy, dx) - heading, dist)))
+    steering = min(max(steering, STEERING_RANGE[0]), STEERING_RANGE[1])
+    return accel, steering
+
+
+def pursuit_slip(bearing, dist):
+    """Slip angle beta of the constant-steering arc that reaches a point ``dist`` m away at
+    ``bearing`` rad from the heading. In highway-env's bicycle model the centre of gravity
+    moves along heading + beta on a circle of curvature 2 sin(beta) / length, and a circle
+    with initial direction heading + beta through the point has curvature
+    2 sin(bearing - beta) / dist; beta solves sin(beta) / length = sin(bearing - beta) / dist
+    (increasing in beta, so bisection finds it)."""
+    bearing = wrap(bearing)
+    lo, hi = -1.2, 1.2
+    f = lambda b: math.sin(b) / VEHICLE_LENGTH - math.sin(bearing - b) / dist  # noqa: E731
+    if f(lo) > 0.0:
+        return lo
+    if f(hi) < 0.0:
+        return hi
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if f(mid) < 0.0:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def to_unit(value, lo, hi):
+    """Inverse of highway-env's lmap from [-1, 1] to [lo, hi]."""
+    return float(np.clip(2.0 * (value - lo) / (hi - lo) - 1.0, -1.0, 1.0))
+
+
+class ConcordProcess:
+    """``concord run`` on a private prefix, and the link to it."""
+
+    started = 0
+
+    def __init__(self, binary, geometry, rate, config=None, log=None, trace=False):
+        from concord_link import ConcordLink, _service
+
+        ConcordProcess.started += 1
+        self.prefix = f"hw-{os.getpid()}-{ConcordProcess.started}/"
+        args = [binary, "run", "--prefix", self.prefix, "--geometry", geometry,
+                "--rate", str(rate)]
+        if config:
+            args += ["--config", config]
+        self.log = open(log, "a", encoding="utf-8") if log else subprocess.DEVNULL
+        self.proc = subprocess.Popen(args, cwd=ROOT, stderr=self.log, stdout=self.log)
+        self.link = ConcordLink(prefix=self.prefix,
+                                node_name=f"highway-bridge-{os.getpid()}-{ConcordProcess.started}")
+        # The advice requests carry the OPM triplet of each decision: conflicts, selected
+        # objects, P_n; --trace logs them.
+        self.requests = None
+        if trace:
+            self.requests = (_service(self.link.node, wire.service_name("advice_request", self.prefix),
+                                      wire.AdviceRequest)
+                             .subscriber_builder().buffer_size(64).create())
+        deadline = time.monotonic() + 30
+        while self.link.latest_stats() is None:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"concord run exited with {self.proc.returncode}")
+            if time.monotonic() > deadline:
+                self.close()
+                raise RuntimeError("concord run never published statistics")
+            time.sleep(0.05)
+
+    def close(self):
+        self.requests = None
+        self.link = None  # releases the iceoryx2 node and its ports
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        if self.log is not subprocess.DEVNULL:
+            self.log.close()
+
+
+class ConcordPolicy:
+    """One decision per environment step, in lock-step."""
+
+    def __init__(self, args, spec, period):
+        self.core_args = (args.concord, spec["geometry"], args.rate, args.config,
+                          args.core_log, bool(args.trace))
+        self.restart = not args.keep_core
+        self.core = ConcordProcess(*self.core_args)
+        self.trace = open(args.trace, "w", encoding="utf-8") if args.trace else None
+        self.route_lane = spec["route_lane"]
+        self.period = period
+        self.lookahead = args.lookahead
+        self.timeout = args.timeout
+        self.estimate_accel = args.estimate_accel
+        self.tracker = Tracker()
+        self.sequence = 0
+        self.origin_ns = time.monotonic_ns()
+        self.ego_accel = 0.0
+        self.ego_steering = 0.0
+
+    def reset(self):
+        """A new episode. The core's Monte Carlo RNG is seeded with seed XOR cycle, so by default
+        each episode gets a fresh core, and a seed's outcome does not depend on the seeds run
+        before it (``--keep-core`` keeps one core for the whole run)."""
+        if self.restart and self.core is not None:
+            self.core.close()
+            self.core = None
+        if self.core is None:
+            self.core = ConcordProcess(*self.core_args)
+        self.tracker.reset()
+        self.ego_accel = 0.0
+        self.ego_steering = 0.0
+
+    def frame(self, obs, sim_time):
+        rows = [r for r in obs if r[0] > 0.5]
+        ego, others = rows[0], rows[1:1 + wire.MAX_AGENTS]
+        self.sequence += 1
+        f = wire.SceneFrame()
+        f.sequence = self.sequence
+        f.stamp_ns = self.origin_ns + int(round(sim_time * 1e9))
+        _, ex, ey, evx, evy, eh = (float(v) for v in ego)
+        # highway-env reports velocity along the body heading, but its bicycle model moves the
+        # centre of gravity along heading + slip, beta = atan(tan(steering) / 2). Reported as
+        # is, a car in a steady turn would seem to drift outwards at v sin(beta) (1.7 m/s at
+        # 9 m/s on the 13 m left turn), and every plan would start with that drift. The bridge
+        # knows the steering it commanded, so it reports the true velocity (and acceleration)
+        # direction; the heading stays the body's.
+        speed = math.hypot(evx, evy)
+        course = eh + math.atan(0.5 * math.tan(self.ego_steering))
+        evx, evy = speed * math.cos(course), speed * math.sin(course)
+        f.ego = wire_agent(ex, ey, evx, evy, eh, 0,
+                           self.ego_accel * math.cos(course), self.ego_accel * math.sin(course))
+        ids = self.tracker.update([tuple(float(v) for v in r[1:]) for r in others], self.period)
+        for k, (r, (tid, prev)) in enumerate(zip(others, ids)):
+            _, x, y, vx, vy, h = (float(v) for v in r)
+            ax = ay = 0.0
+            if self.estimate_accel and prev is not None:
+                ax, ay = (vx - prev[0]) / self.period, (vy - prev[1]) / self.period
+                norm = math.hypot(ax, ay)
+                if norm > 6.0:
+                    ax, ay = ax * 6.0 / norm, ay * 6.0 / norm
+            f.agents[k] = wire_agent(x, y, vx, vy, h, tid, ax, ay)
+        f.ego_route_lane = self.route_lane
+        return f, (ex, ey, eh, math.hypot(evx, evy))
+
+    def act(self, obs, sim_time):
+        """The action for this step and the decision, or (None, None) on a timeout."""
+        f, (x, y, h, v) = self.frame(obs, sim_time)
+        self.core.link.publish_scene(f)
+        d = self.core.link.wait_for_decision(f.sequence, timeout_s=self.timeout)
+        if d is None:
+            return None, None
+        accel, steering = follow(d, x, y, h, v, self.period, self.lookahead)
+        self.ego_accel, self.ego_steering = accel, steering
+        if self.trace:
+            self.write_trace(f, d, sim_time, accel, steering)
+        return np.array([to_unit(accel, *ACCEL_RANGE), to_unit(steering, *STEERING_RANGE)],
+                        dtype=np.float32), d
+
+    def write_trace(self, f, d, sim_time, accel, steering):
+        from concord_link import ConcordLink
+
+        request = None
+        for r in ConcordLink._drain(self.core.requests, wire.AdviceRequest):
+            if r.scene_sequence == f.sequence:
+                request = r
+        rec = {
+            "t": round(sim_time, 3), "seq": f.sequence,
+            "ego": [round(f.ego.x, 2), round(f.ego.y, 2), round(math.hypot(f.ego.vx, f.ego.vy), 2)],
+            "maneuver": wire.MANEUVERS[d.maneuver], "source": wire.SOURCES[d.source],
+            "p": [round(p, 3) for p in d.p_corrected], "accel": round(accel, 2),
+            "steer": round(steering, 3),
+            "plan_v": [round(d.trajectory[k].speed, 2) for k in (0, 10, 20, 30, 40, 50)
+                       if k < d.n_points],
+            "agents": [[a.id, round(a.x, 1), round(a.y, 1), round(math.hypot(a.vx, a.vy), 1)]
+                       for a in f.agents if a.valid],
+            # Exact scene, for replaying it through the core: [id, x, y, vx, vy, ax, ay, heading].
+            "scene": {"time": f.stamp_ns - self.origin_ns, "lane": f.ego_route_lane,
+                      "ego": _state(f.ego),
+                      "agents": [_state(a) for a in f.agents if a.valid]},
+        }
+        if request is not None:
+            rec["ego_s"] = round(request.ego.s_m, 2)
+            rec["conflicts"] = [
+                {"id": c.agent_id, "de": round(c.ego_dist_m, 1), "da": round(c.agent_dist_m, 1),
+                 "te": round(c.ego_ttc_s, 2), "ta": round(c.agent_ttc_s, 2),
+                 "risky": c.risky} for c in request.conflicts[:request.n_conflicts]]
+            rec["objects"] = [
+                {"id": o.state.id, "lane": o.process.lane, "s": round(o.process.s_m, 1),
+                 "l": round(o.process.l_m, 2)} for o in request.objects[:request.n_objects]]
+            rec["leader_gap"] = (None if request.leader_gap_m > 1e300
+                                 else round(request.leader_gap_m, 1))
+        self.trace.write(json.dumps(rec) + "\n")
+
+    def close(self):
+        if self.trace:
+            self.trace.close()
+        if self.core is not None:
+            self.core.close()
+
+
+def run_episode(env, policy, name, seed, period, spec, verbose=False):
+    """One seed. Returns the episode's outcome as a dict."""
+    obs, _ = env.reset(seed=seed)
+    u = env.unwrapped
+    if name == "concord":
+        policy.reset()
+    speeds, min_risk, decisions, steps, timed_out = [], 0, 0, 0, False
+    maneuvers = {}
+    crashed = arrived = False
+    while True:
+        sim_time = steps * period
+        if name == "concord":
+            action, d = policy.act(obs, sim_time)
+            if action is None:
+                timed_out = True
+                break
+            decisions += 1
+            if wire.SOURCES[d.source] == "minimum_risk":
+                min_risk += 1
+            m = wire.MANEUVERS[d.maneuver]
+            maneuvers[m] = maneuvers.get(m, 0) + 1
+        else:
+            action = DISCRETE[name]
+        obs, _, terminated, truncated, info = env.step(action)
+        steps += 1
+        speeds.append(float(u.vehicle.speed))
+        crashed = bool(u.vehicle.crashed)
+        arrived = bool(u.has_arrived(u.vehicle))
+        if verbose and name == "concord":
+            print(f"  seed {seed} t={steps * period:5.2f} pos=({u.vehicle.position[0]:6.1f},"
+                  f"{u.vehicle.position[1]:6.1f}) v={u.vehicle.speed:4.1f} {m} "
+                  f"{wire.SOURCES[d.source]}", file=sys.stderr)
+        if terminated or truncated:
+            break
+    return {
+        "seed": seed,
+        "steps": steps,
+        "decisions": decisions,
+        "crashed": crashed,
+        "arrived": arrived and not crashed,
+        "timed_out": timed_out,
+        "mean_speed": float(np.mean(speeds)) if speeds else 0.0,
+        "speed_sum": float(np.sum(speeds)),
+        "sim_time_s": steps * period,
+        "minimum_risk": min_risk,
+        "maneuvers": maneuvers,
+        "final_position": [float(v) for v in u.vehicle.position],
+        "final_progress_m": float(spec["progress"](*u.vehicle.position)),
+    }
+
+
+def summarize(env_name, name, episodes):
+    n = len(episodes)
+    steps = sum(e["steps"] for e in episodes)
+    return {
+        "env": env_name,
+        "policy": name,
+        "seeds": n,
+        "collision_rate": sum(e["crashed"] for e in episodes) / n,
+        "success_rate": sum(e["arrived"] for e in episodes) / n,
+        "timeouts": sum(e["timed_out"] for e in episodes),
+        "mean_speed_mps": sum(e["speed_sum"] for e in episodes) / max(steps, 1),
+        "steps": steps,
+        "decisions": sum(e["decisions"] for e in episodes),
+        "minimum_risk_decisions": sum(e["minimum_risk"] for e in episodes),
+    }
+
+
+def summary_line(s):
+    return (f"{s['env']} {s['policy']}: {s['seeds']} seeds, collisions "
+            f"{100 * s['collision_rate']:.1f} %, success {100 * s['success_rate']:.1f} %, "
+            f"mean speed {s['mean_speed_mps']:.1f} m/s")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--env", default="intersection-v0", choices=sorted(ENVS))
+    ap.add_argument("--seeds", type=int, default=50, help="number of seeds (default 50)")
+    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--policy", default="concord", choices=POLICIES)
+    ap.add_argument("--concord", default=os.path.join(ROOT, "target", "release", "concord"),
+                    help="concord binary (default target/release/concord)")
+    ap.add_argument("--config", default=None,
+                    help="TOML for concord run --config (default deploy/highway-env.toml)")
+    ap.add_argument("--rate", type=float, default=100.0, help="core loop rate, Hz")
+    ap.add_argument("--policy-frequency", type=int, default=5,
+                    help="environment steps per simulated second (highway-env default 1)")
+    ap.add_argument("--lookahead", type=float, default=0.6,
+                    help="time ahead on the trajectory that the steering aims at, s")
+    ap.add_argument("--timeout", type=float, default=2.0,
+                    help="seconds to wait for a decision before the episode fails")
+    ap.add_argument("--estimate-accel", action="store_true",
+                    help="send other vehicles' accelerations estimated from their tracks")
+    ap.add_argument("--keep-core", action="store_true",
+                    help="one concord run for all seeds (default: a fresh core per seed)")
+    ap.add_argument("--core-log", default=None, help="file for concord run's stderr")
+    ap.add_argument("--trace", default=None,
+                    help="write one JSON line per decision (scene, OPM conflicts, P_n) here")
+    ap.add_argument("--json", default=None, help="write the results to this file")
+    ap.add_argument("--verbose", action="store_true")
+    args = ap.parse_args(argv)
+    if args.config is None:
+        default = os.path.join(ROOT, "deploy", "highway-env.toml")
+        args.config = default if os.path.exists(default) else None
+
+    import gymnasium as gym
+    import highway_env  # noqa: F401  (registers the environments)
+
+    spec = ENVS[args.env]
+    period = 1.0 / args.policy_frequency
+    env = gym.make(args.env, config=env_config(args.policy, args.policy_frequency))
+    policy = ConcordPolicy(args, spec, period) if args.policy == "concord" else None
+    episodes = []
+    started = time.monotonic()
+    try:
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
+            e = run_episode(env, policy, args.policy, seed, period, spec, args.verbose)
+            episodes.append(e)
+            outcome = ("COLLISION" if e["crashed"] else "arrived" if e["arrived"]
+                       else "decision timeout" if e["timed_out"] else "not arrived")
+            print(f"seed {seed:3d}: {outcome:16s} {e['sim_time_s']:5.1f} s simulated, "
+                  f"mean speed {e['mean_speed']:4.1f} m/s, route {e['final_progress_m']:5.1f} m, "
+                  f"minimum-risk {e['minimum_risk']}",
+                  flush=True)
+    finally:
+        if policy is not None:
+            policy.close()
+        env.close()
+    s = summarize(args.env, args.policy, episodes)
+    s["policy_frequency_hz"] = args.policy_frequency
+    s["wall_time_s"] = time.monotonic() - started
+    print(f"decisions {s['decisions']} for {s['steps']} steps, minimum-risk "
+          f"{s['minimum_risk_decisions']}, decision timeouts {s['timeouts']}")
+    print(summary_line(s))
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump({"summary": s, "episodes": episodes, "args": vars(args)}, f, indent=1)
+    return s
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,118 @@
+"""The highway-env bridge drives a real `concord run` in lock-step and reports well-formed results.
+
+Needs the packages of requirements.txt (highway-env, iceoryx2) and a built `concord` binary
+($CONCORD_BIN, default target/debug/concord). Runs the bridge's command line for two seeds of
+intersection-v0 (about 20 s) and one seed of a baseline, which needs no core.
+"""
+
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import unittest
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+CONCORD = os.environ.get("CONCORD_BIN", os.path.join(ROOT, "target", "debug", "concord"))
+SUMMARY = re.compile(r"^intersection-v0 (\w+): (\d+) seeds, collisions (\d+\.\d) %, "
+                     r"success (\d+\.\d) %, mean speed (\d+\.\d) m/s$")
+
+
+def run_bridge(*args):
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "result.json")
+        proc = subprocess.run(
+            [sys.executable, "-W", "ignore", os.path.join(HERE, "highway_bridge.py"),
+             "--env", "intersection-v0", "--json", out, *args],
+            cwd=HERE, capture_output=True, text=True, timeout=120)
+        if proc.returncode != 0:
+            raise AssertionError(f"bridge failed ({proc.returncode}):\n{proc.stdout}\n{proc.stderr}")
+        with open(out, encoding="utf-8") as f:
+            return proc.stdout, json.load(f)
+
+
+class Following(unittest.TestCase):
+    """The controller's geometry, without a simulator."""
+
+    def test_pursuit_holds_the_bicycle_model_on_a_circle(self):
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+
+        # Steady state on a 13 m circle (the left turn): the centre of gravity moves along the
+        # tangent, the body lags by the slip angle asin(L / 2R), steering atan(2 tan(slip)).
+        r = 13.0
+        slip = math.asin(hb.VEHICLE_LENGTH / (2 * r))
+        heading = math.pi / 2 - slip  # at (r, 0), moving counter-clockwise
+        for ahead in (3.0, 6.0, 10.0):
+            phi = ahead / r
+            dx, dy = r * math.cos(phi) - r, r * math.sin(phi)
+            beta = hb.pursuit_slip(math.atan2(dy, dx) - heading, math.hypot(dx, dy))
+            self.assertAlmostEqual(beta, slip, places=6)
+        self.assertAlmostEqual(math.atan(2 * math.tan(slip)), 0.3738, places=3)
+
+    def test_route_progress_of_the_left_turn(self):
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+
+        self.assertAlmostEqual(hb.intersection_progress(2.0, 39.0), 72.0)
+        self.assertAlmostEqual(hb.intersection_progress(2.0, 11.0), 100.0)
+        quarter = 13.0 * math.pi / 2
+        self.assertAlmostEqual(hb.intersection_progress(-11.0 + 13 / math.sqrt(2),
+                                                        11.0 - 13 / math.sqrt(2)),
+                               100.0 + quarter / 2)
+        # Arrival (25 m into the exit lane) is 145.4 m along the route.
+        self.assertAlmostEqual(hb.intersection_progress(-36.0, -2.0), 100.0 + quarter + 25.0)
+
+
+class HighwayBridge(unittest.TestCase):
+    def check_summary(self, stdout, result, policy, seeds):
+        last = stdout.strip().splitlines()[-1]
+        m = SUMMARY.match(last)
+        self.assertIsNotNone(m, f"summary line: {last!r}")
+        self.assertEqual(m.group(1), policy)
+        self.assertEqual(int(m.group(2)), seeds)
+        s = result["summary"]
+        self.assertEqual(s["seeds"], seeds)
+        self.assertEqual(len(result["episodes"]), seeds)
+        for key in ("collision_rate", "success_rate"):
+            self.assertTrue(0.0 <= s[key] <= 1.0, f"{key} = {s[key]}")
+        self.assertLessEqual(s["collision_rate"] + s["success_rate"], 1.0 + 1e-9)
+        self.assertTrue(math.isfinite(s["mean_speed_mps"]) and 0.0 <= s["mean_speed_mps"] <= 20.0)
+        # The printed line rounds the JSON's numbers.
+        self.assertAlmostEqual(float(m.group(3)), 100 * s["collision_rate"], delta=0.051)
+        self.assertAlmostEqual(float(m.group(4)), 100 * s["success_rate"], delta=0.051)
+        self.assertAlmostEqual(float(m.group(5)), s["mean_speed_mps"], delta=0.051)
+        for e in result["episodes"]:
+            self.assertGreater(e["steps"], 0)
+            self.assertFalse(e["crashed"] and e["arrived"])
+        return s
+
+    def test_concord_decides_every_step_of_two_seeds(self):
+        self.assertTrue(os.path.exists(CONCORD), f"build concord first: {CONCORD}")
+        stdout, result = run_bridge("--policy", "concord", "--seeds", "2", "--concord", CONCORD)
+        s = self.check_summary(stdout, result, "concord", 2)
+        self.assertEqual(s["timeouts"], 0, stdout)
+        self.assertEqual(s["decisions"], s["steps"])
+        for e in result["episodes"]:
+            self.assertFalse(e["timed_out"])
+            self.assertEqual(e["decisions"], e["steps"], f"seed {e['seed']}")
+            self.assertEqual(sum(e["maneuvers"].values()), e["decisions"])
+            self.assertLessEqual(e["minimum_risk"], e["decisions"])
+            # Every episode ends: a collision, an arrival or the 13 s limit.
+            self.assertTrue(e["crashed"] or e["arrived"] or e["sim_time_s"] >= 13.0 - 1e-6, e)
+        self.assertLessEqual(s["minimum_risk_decisions"], s["decisions"])
+
+    def test_a_baseline_runs_without_concord(self):
+        stdout, result = run_bridge("--policy", "idle", "--seeds", "1", "--concord",
+                                    "/nonexistent/concord")
+        s = self.check_summary(stdout, result, "idle", 1)
+        self.assertEqual(s["decisions"], 0)
+        # intersection-v0's ego starts at its lane's 10 m/s and IDLE holds the 9 m/s set-point.
+        self.assertGreater(s["mean_speed_mps"], 8.0)
+
+
+if __name__ == "__main__":
+    unittest.main()

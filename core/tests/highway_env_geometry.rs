@@ -1,0 +1,154 @@
+//! The built-in geometry of highway-env's intersection-v0 (`BuiltIn::HighwayEnvIntersection`):
+//! lanes, conflict points against hand-computed circle intersections, and lane matching of
+//! poses as highway-env reports them.
+
+use concord_core::scene::highway_env_intersection::*;
+use concord_core::scene::{
+    AgentState, BuiltIn, Morphology, Turn, Vec2, MAX_LANES, MAX_LANE_POINTS,
+};
+use concord_core::{DecisionCore, Params};
+use std::f64::consts::{FRAC_PI_2, PI};
+
+/// Chords of 1 m on a 13 m arc sag by 1 cm; crossings of two chorded arcs move by a few.
+const TOL: f64 = 0.05;
+
+fn morph() -> Morphology {
+    Morphology::built_in(BuiltIn::HighwayEnvIntersection)
+}
+
+fn conflict_point(m: &Morphology, a: u8, b: u8) -> Option<(f64, f64, Vec2)> {
+    m.conflicts().iter().find_map(|c| {
+        if c.lane_a == a && c.lane_b == b {
+            Some((c.s_a, c.s_b, c.pos))
+        } else if c.lane_a == b && c.lane_b == a {
+            Some((c.s_b, c.s_a, c.pos))
+        } else {
+            None
+        }
+    })
+}
+
+fn near(p: Vec2, x: f64, y: f64) -> bool {
+    (p.x - x).abs() < TOL && (p.y - y).abs() < TOL
+}
+
+#[test]
+fn lanes_fit_the_core_and_reproduce_highway_env_lengths() {
+    let m = morph();
+    assert_eq!(m.lanes().len(), LANES);
+    const { assert!(LANES <= MAX_LANES) };
+    let quarter = |r: f64| r * FRAC_PI_2;
+    for (i, lane) in m.lanes().iter().enumerate() {
+        assert!(lane.points().len() <= MAX_LANE_POINTS, "lane {i}");
+        assert_eq!(lane.half_width, 2.0, "lane {i}");
+        assert_eq!(lane.stop_s, APPROACH_M, "lane {i}");
+        // Approach, junction, exit: 100 m + (22 m straight | a quarter circle) + 100 m.
+        let junction = match lane.turn {
+            Turn::Straight => 2.0 * OUTER_M,
+            Turn::Left => quarter(LEFT_TURN_RADIUS_M),
+            Turn::Right => quarter(RIGHT_TURN_RADIUS_M),
+        };
+        let expected = 2.0 * APPROACH_M + junction;
+        assert!(
+            (lane.length() - expected).abs() < 0.02,
+            "lane {i}: length {} != {expected}",
+            lane.length()
+        );
+    }
+    let ego = m.lane(EGO_LEFT);
+    assert_eq!(ego.turn, Turn::Left);
+    // highway-env: o0 starts at (2, 111); il1 → o1 ends at (−111, −2).
+    let (first, last) = (ego.points()[0], *ego.points().last().unwrap());
+    assert!(near(first, 2.0, 111.0) && near(last, -111.0, -2.0));
+    // The turn ends where the west exit begins, (−11, −2), heading −x (π).
+    let (p, tangent, _) = ego.pose_at(APPROACH_M + quarter(LEFT_TURN_RADIUS_M) + 1.0, 0);
+    assert!(near(p, -12.0, -2.0), "{p:?}");
+    assert!((tangent.abs() - PI).abs() < 1e-3, "{tangent}");
+}
+
+#[test]
+fn the_left_turn_conflicts_with_every_crossing_and_joining_lane() {
+    let m = morph();
+    // Ego arc: centre (−11, 11), radius 13. Crossings with x = −2 and y = 2 are 11 − √88 from
+    // the centre lines; with the radius-13 arcs centred at (−11, −11) and (11, 11) they are on
+    // the bisector, √(13² − 11²) = √48 from it.
+    let r88 = 11.0 - 88f64.sqrt();
+    let r48 = 48f64.sqrt();
+    let expect = [
+        (NORTH_STRAIGHT, -2.0, r88),
+        (WEST_STRAIGHT, -r88, 2.0),
+        (WEST_LEFT, -11.0 + r48, 0.0),
+        (EAST_LEFT, 0.0, 11.0 - r48),
+        // Joining: the exit lane il1 → o1 begins at (−11, −2).
+        (NORTH_RIGHT, -11.0, -2.0),
+        (EAST_STRAIGHT, -11.0, -2.0),
+    ];
+    for (lane, x, y) in expect {
+        let (s_ego, s_other, p) = conflict_point(&m, EGO_LEFT, lane)
+            .unwrap_or_else(|| panic!("no conflict between the turn and lane {lane}"));
+        assert!(
+            near(p, x, y),
+            "lane {lane}: conflict at {p:?}, expected ({x}, {y})"
+        );
+        // Arc lengths locate the same point on both lanes.
+        let on_ego = m.lane(EGO_LEFT).pose_at(s_ego, 0).0;
+        let on_other = m.lane(lane).pose_at(s_other, 0).0;
+        assert!(near(on_ego, x, y) && near(on_other, x, y), "lane {lane}");
+        // Every conflict lies in the junction, after the stop line of both lanes.
+        assert!(
+            s_ego > APPROACH_M && s_other > APPROACH_M - TOL,
+            "lane {lane}"
+        );
+    }
+    // Crossings order along the turn: east-left, west-straight, north-straight, west-left,
+    // then the joins at the end of the arc.
+    let s = |lane| conflict_point(&m, EGO_LEFT, lane).unwrap().0;
+    assert!(s(EAST_LEFT) < s(WEST_STRAIGHT));
+    assert!(s(WEST_STRAIGHT) < s(NORTH_STRAIGHT));
+    assert!(s(NORTH_STRAIGHT) < s(WEST_LEFT));
+    assert!(s(WEST_LEFT) < s(NORTH_RIGHT));
+    assert!((s(NORTH_RIGHT) - s(EAST_STRAIGHT)).abs() < TOL);
+    // The oncoming left turn passes without crossing (the circles are 31 m apart, radii 13).
+    assert!(conflict_point(&m, EGO_LEFT, NORTH_LEFT).is_none());
+}
+
+#[test]
+fn highway_env_poses_match_their_lanes() {
+    let m = morph();
+    let at = |x: f64, y: f64, heading: f64| {
+        let a = AgentState::moving(1, Vec2::new(x, y), heading, 8.0);
+        m.match_lane(a.pos, a.direction(), 1.0)
+            .map(|(lane, _)| lane)
+    };
+    // intersection-v0's ego spawn: (2, ~39), heading −π/2 (towards −y).
+    assert_eq!(at(2.0, 39.3, -FRAC_PI_2), Some(EGO_LEFT));
+    // Priority road from the west (heading 0) and from the east (heading π).
+    assert_eq!(at(-42.0, 2.0, 0.0), Some(WEST_STRAIGHT));
+    assert_eq!(at(45.9, -2.0, PI), Some(EAST_STRAIGHT));
+    // Oncoming from the north, heading +π/2; half-way through its left turn it is on its arc.
+    assert_eq!(at(-2.0, -47.9, FRAC_PI_2), Some(NORTH_STRAIGHT));
+    let phase = PI - FRAC_PI_2 / 2.0;
+    let (x, y) = (11.0 + 13.0 * phase.cos(), -11.0 + 13.0 * phase.sin());
+    assert_eq!(at(x, y, FRAC_PI_2 / 2.0), Some(NORTH_LEFT));
+}
+
+#[test]
+fn a_core_on_the_geometry_sees_the_oncoming_car_as_a_risky_conflict() {
+    let mut core =
+        DecisionCore::new(Params::default(), morph()).expect("default parameters are valid");
+    // Ego 20 m before the junction at 8 m/s; oncoming car 20 m before it at 8 m/s.
+    let ego = AgentState::moving(0, Vec2::new(2.0, 31.0), -FRAC_PI_2, 8.0);
+    let mut scene = concord_core::Scene::new(0.0, ego, EGO_LEFT);
+    scene.push(AgentState::moving(
+        1,
+        Vec2::new(-2.0, -31.0),
+        FRAC_PI_2,
+        8.0,
+    ));
+    core.step(&scene, 0.0, None).expect("a valid scene");
+    let t = core.triplet();
+    assert_eq!(t.n_conflicts, 1);
+    let c = t.conflicts[0];
+    assert!(c.is_risky(&Params::default().opm), "{c:?}");
+    assert!(near(c.point, -2.0, 11.0 - 88f64.sqrt()));
+}
