@@ -30,7 +30,9 @@ step "benchmarks run once each (criterion --test)"
 cargo bench -p concord-bench --benches -- --test
 
 step "the demo completes the paper's left turn"
-cargo run --release --quiet -- demo --speed 8 | tee /dev/stderr | grep -q "^outcome: turn completed"
+demo=$(cargo run --release --quiet -- demo --speed 8)
+echo "$demo"
+grep -q "^outcome: turn completed" <<<"$demo"
 
 step "the core is no_std without alloc"
 grep -q '^#!\[no_std\]' core/src/lib.rs
