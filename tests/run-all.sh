@@ -19,6 +19,9 @@ cargo test --workspace 2>&1 | tee "$log"
 
 step "Python bridges: wire mirror layout, interop with a running core, highway-env (unittest)"
 python=$(bridges/python/setup.sh)
+target_dir=${CARGO_TARGET_DIR:-target}
+CONCORD_BIN="$(cd "$target_dir" && pwd)/debug/concord"
+export CONCORD_BIN
 (cd bridges/python && "$python" -m unittest -v test_wire_layout test_interop test_highway_bridge) 2>&1 | tee -a "$log"
 
 passed=$(grep -o '[0-9]* passed' "$log" | awk '{s += $1} END {print s + 0}')
