@@ -390,25 +390,22 @@ fn demo(speed: f64, duration: f64, iox_path: Option<&Path>) -> Result<(), String
     let started = clock::now_ns();
     let mut last_print = 0u64;
     let mut last_stats = None;
-    let mut last_line = String::new();
+    // Maneuver, source and advice verdict of the last decision printed.
+    let mut last_shown = None;
     let feed_status = loop {
         if node.wait(Duration::from_millis(20)).is_err() {
             break None;
         }
         while let Ok(Some(d)) = decisions.receive() {
-            let line = monitor::describe(&d);
-            let key = line
-                .split(" via ")
-                .nth(1)
-                .unwrap_or("")
-                .split(", P_n")
-                .next()
-                .unwrap_or("")
-                .to_owned();
+            let shown = Some((d.maneuver, d.source, d.advice));
             let now = clock::now_ns();
-            if key != last_line || now - last_print > 1_000_000_000 {
-                println!("{:6.2} s  {line}", (now - started) as f64 * 1e-9);
-                last_line = key;
+            if shown != last_shown || now - last_print > 1_000_000_000 {
+                println!(
+                    "{:6.2} s  {}",
+                    (now - started) as f64 * 1e-9,
+                    monitor::describe(&d)
+                );
+                last_shown = shown;
                 last_print = now;
             }
         }
