@@ -54,6 +54,14 @@ impl GeometryArg {
     }
 }
 
+/// Prompt renderings of `concord sidecar --format`.
+#[derive(Clone, Copy, ValueEnum)]
+enum FormatArg {
+    Opm,
+    Raw,
+    Simple,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Run the paper's left turn across processes: feed, core and a console; ends with a summary.
@@ -133,8 +141,24 @@ enum Command {
         #[arg(long)]
         check: Option<PathBuf>,
     },
-    /// Run the LLM sidecar (not yet available).
-    Sidecar,
+    /// Run the LLM sidecar: advice, intents and eHMI text from an OpenAI-compatible server.
+    Sidecar {
+        /// Configuration file (TOML; see deploy/sidecar.toml). Missing keys take defaults.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Service-name prefix, overriding the file's.
+        #[arg(long)]
+        prefix: Option<String>,
+        /// Base URL of the LLM server (…/v1), overriding the file's.
+        #[arg(long)]
+        llm_url: Option<String>,
+        /// Prompt rendering of the scene, overriding the file's.
+        #[arg(long, value_enum)]
+        format: Option<FormatArg>,
+        /// Interaction log file, overriding the file's ("" disables it).
+        #[arg(long)]
+        log: Option<PathBuf>,
+    },
     /// Rerun the paper's experiments (not yet available).
     Experiment,
 }
@@ -222,7 +246,38 @@ fn main() -> ExitCode {
         Command::Params { check: Some(path) } => {
             load_config(Some(&path)).map(|_| println!("{}: ok", path.display()))
         }
-        Command::Sidecar => Err("not yet available: it lands with the LLM-sidecar issue".into()),
+        Command::Sidecar {
+            config,
+            prefix,
+            llm_url,
+            format,
+            log,
+        } => (|| {
+            use concord_sidecar::config::PromptFormat;
+            let mut cfg = match config {
+                Some(path) => concord_sidecar::SidecarConfig::load(&path)?,
+                None => concord_sidecar::SidecarConfig::default(),
+            };
+            if let Some(p) = prefix {
+                cfg.prefix = p;
+            }
+            if let Some(u) = llm_url {
+                cfg.llm.base_url = u;
+            }
+            if let Some(f) = format {
+                cfg.advice.prompt_format = match f {
+                    FormatArg::Opm => PromptFormat::Opm,
+                    FormatArg::Raw => PromptFormat::Raw,
+                    FormatArg::Simple => PromptFormat::Simple,
+                };
+            }
+            if let Some(l) = log {
+                cfg.log.path = l;
+            }
+            cfg.validate()?;
+            let iox_config = iox::init(iox_path.as_deref()).map_err(|e| e.to_string())?;
+            concord_sidecar::run(cfg, &iox_config)
+        })(),
         Command::Experiment => {
             Err("not yet available: it lands with the closed-loop evaluation issue".into())
         }

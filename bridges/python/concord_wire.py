@@ -122,6 +122,7 @@ class WireDecision(_Wire):
         ("scene_stamp_ns", ctypes.c_uint64),
         ("decided_ns", ctypes.c_uint64),
         ("compute_ns", ctypes.c_uint64),
+        ("advice_request_id", ctypes.c_uint64),
         ("p_logit", ctypes.c_double * 5),
         ("p_corrected", ctypes.c_double * 5),
         ("trajectory", WirePoint * MAX_POINTS),
@@ -220,7 +221,8 @@ class WireAdvice(_Wire):
         ("maneuver", ctypes.c_uint8),
         ("valid", ctypes.c_uint8),
         ("n_agent_intents", ctypes.c_uint8),
-        ("reserved", ctypes.c_uint8 * 5),
+        ("failure", ctypes.c_uint8),
+        ("reserved", ctypes.c_uint8 * 4),
     ]
 
 
@@ -243,7 +245,10 @@ class EhmiMessage(_Wire):
         ("stamp_ns", ctypes.c_uint64),
         ("len", ctypes.c_uint16),
         ("maneuver", ctypes.c_uint8),
-        ("reserved", ctypes.c_uint8 * 5),
+        ("audience", ctypes.c_uint8),
+        ("addressee", ctypes.c_uint32),
+        ("kind", ctypes.c_uint8),
+        ("reserved", ctypes.c_uint8 * 7),
         ("text", ctypes.c_uint8 * TEXT_BYTES),
     ]
 
@@ -266,6 +271,7 @@ class CoreStats(_Wire):
         ("advice_requests", ctypes.c_uint64),
         ("advice_received", ctypes.c_uint64),
         ("advice_verdicts", ctypes.c_uint64 * 8),
+        ("advice_failures", ctypes.c_uint64 * 5),
         ("cycle_ns", ctypes.c_uint64 * 5),
         ("scene_age_ns", ctypes.c_uint64 * 5),
         ("decide_ns", ctypes.c_uint64 * 5),

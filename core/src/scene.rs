@@ -163,6 +163,21 @@ impl ExplicitIntent {
             || self.strong_action(threshold).is_some()
             || self.strong_task(threshold).is_some()
     }
+    /// Each dimension from whichever of `self` and `other` is the more confident parse.
+    pub fn merged_with(&self, other: &ExplicitIntent) -> ExplicitIntent {
+        fn pick<T: Copy>(a: Option<Rated<T>>, b: Option<Rated<T>>) -> Option<Rated<T>> {
+            match (a, b) {
+                (Some(x), Some(y)) if y.confidence > x.confidence => Some(y),
+                (None, y) => y,
+                (x, _) => x,
+            }
+        }
+        ExplicitIntent {
+            style: pick(self.style, other.style),
+            action: pick(self.action, other.action),
+            task: pick(self.task, other.task),
+        }
+    }
     fn confidences(&self) -> [Option<f64>; 3] {
         [
             self.style.map(|r| r.confidence),

@@ -65,6 +65,7 @@ fn main() {
             scene_stamp_ns,
             decided_ns,
             compute_ns,
+            advice_request_id,
             p_logit,
             p_corrected,
             trajectory,
@@ -139,6 +140,7 @@ fn main() {
             maneuver,
             valid,
             n_agent_intents,
+            failure,
             reserved
         }),
         layout!(IntentText {
@@ -154,6 +156,9 @@ fn main() {
             stamp_ns,
             len,
             maneuver,
+            audience,
+            addressee,
+            kind,
             reserved,
             text
         }),
@@ -173,6 +178,7 @@ fn main() {
             advice_requests,
             advice_received,
             advice_verdicts,
+            advice_failures,
             cycle_ns,
             scene_age_ns,
             decide_ns

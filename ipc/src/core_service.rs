@@ -14,7 +14,7 @@ use std::fmt::Write as _;
 use std::io::Write as _;
 use std::time::Duration;
 
-use concord_core::scene::SceneErrorKind;
+use concord_core::scene::{ExplicitIntent, Scene, SceneErrorKind};
 use concord_core::{Advice, AdviceVerdict, DecisionCore, Maneuver, Params};
 use hdrhistogram::Histogram;
 use iceoryx2::config::Config;
@@ -27,7 +27,8 @@ use crate::iox::{self, IpcError};
 use crate::services;
 use crate::system::{apply_realtime, Notifier, RealtimeConfig};
 use crate::wire::{
-    AdviceRequest, CoreStats, FrameReject, Percentiles, SceneFrame, WireAdvice, WireDecision,
+    AdviceFailure, AdviceRequest, CoreStats, FrameReject, Percentiles, SceneFrame, WireAdvice,
+    WireDecision, WIRE_OBJECTS,
 };
 
 /// Which built-in geometry the core uses.
@@ -70,6 +71,9 @@ pub struct ServiceConfig {
     pub print_period_s: f64,
     /// Geometry of the road.
     pub geometry: Geometry,
+    /// Intents parsed by the sidecar from language apply for this long after the advice that
+    /// carried them, s.
+    pub intent_hold_s: f64,
 }
 
 impl Default for ServiceConfig {
@@ -82,6 +86,7 @@ impl Default for ServiceConfig {
             stats_period_s: 1.0,
             print_period_s: 10.0,
             geometry: Geometry::PaperIntersection,
+            intent_hold_s: 10.0,
         }
     }
 }
@@ -109,6 +114,9 @@ impl RunConfig {
         if !(s.staleness_s.is_finite() && s.staleness_s > 0.0) {
             return Err("service.staleness_s must be > 0".into());
         }
+        if !(s.intent_hold_s.is_finite() && s.intent_hold_s >= 0.0) {
+            return Err("service.intent_hold_s must be >= 0".into());
+        }
         if !(s.stats_period_s.is_finite()
             && s.stats_period_s > 0.0
             && s.print_period_s.is_finite()
@@ -125,6 +133,50 @@ impl RunConfig {
 pub struct StopAfter {
     pub ticks: Option<u64>,
     pub duration_s: Option<f64>,
+}
+
+/// Intents the sidecar parsed from language (eq. 8), held until `expires_ns`.
+#[derive(Clone, Copy, Default)]
+struct LanguageIntents {
+    ego: ExplicitIntent,
+    agents: [(u32, ExplicitIntent); WIRE_OBJECTS],
+    n_agents: usize,
+    expires_ns: u64,
+}
+
+impl LanguageIntents {
+    /// The intents carried by `a`; a dimension with an unknown code is left out.
+    fn from_advice(a: &WireAdvice, expires_ns: u64) -> Self {
+        let mut out = LanguageIntents {
+            ego: a.ego_intent.to_intent().unwrap_or_default(),
+            expires_ns,
+            ..Default::default()
+        };
+        for w in a.agent_intents.iter().take(a.n_agent_intents as usize) {
+            if let Ok(i) = w.intent.to_intent() {
+                out.agents[out.n_agents] = (w.agent_id, i);
+                out.n_agents += 1;
+            }
+        }
+        out
+    }
+    /// Merges the held intents into `scene`, each dimension keeping the more confident parse;
+    /// weak ones are ignored later by the core's threshold.
+    fn apply(&self, scene: &mut Scene, now_ns: u64) {
+        if now_ns >= self.expires_ns {
+            return;
+        }
+        scene.ego.intent = scene.ego.intent.merged_with(&self.ego);
+        let n = scene.n_agents;
+        for agent in scene.agents[..n].iter_mut() {
+            if let Some((_, i)) = self.agents[..self.n_agents]
+                .iter()
+                .find(|(id, _)| *id == agent.id)
+            {
+                agent.intent = agent.intent.merged_with(i);
+            }
+        }
+    }
 }
 
 /// Latency histogram in ns (1 µs to 10 s, 3 significant digits); allocated once.
@@ -178,6 +230,7 @@ struct Loop<'a> {
     last_stamp_ns: u64,
     advice: Option<Advice>,
     advice_unjudged: bool,
+    intents: LanguageIntents,
     decisions_since_request: u32,
     publish_failures: u64,
 }
@@ -244,6 +297,7 @@ pub fn run_observed(
         last_stamp_ns: 0,
         advice: None,
         advice_unjudged: false,
+        intents: LanguageIntents::default(),
         decisions_since_request: 0,
         publish_failures: 0,
     };
@@ -333,8 +387,12 @@ impl Loop<'_> {
     }
 
     fn take_advice(&mut self, a: &WireAdvice, now: u64) {
+        self.intents = LanguageIntents::from_advice(a, now + (self.cfg.intent_hold_s * 1e9) as u64);
         if a.valid == 0 {
             self.stats.advice_verdicts[AdviceVerdict::NoAdvice as usize] += 1;
+            if let Some(f) = AdviceFailure::from_code(a.failure) {
+                self.stats.advice_failures[f as usize] += 1;
+            }
             return;
         }
         match Maneuver::try_from(a.maneuver) {
@@ -369,10 +427,11 @@ impl Loop<'_> {
             }
         }
         self.last_frame = Some((f.sequence, f.stamp_ns));
-        let scene = match f.to_scene() {
+        let mut scene = match f.to_scene() {
             Ok(s) => s,
             Err(_) => return self.reject(FrameReject::BadCode),
         };
+        self.intents.apply(&mut scene, rx);
         let started = now_ns();
         let decision = match self.core.step(&scene, secs(started), self.advice.as_ref()) {
             Ok(d) => d,
@@ -435,13 +494,16 @@ impl Loop<'_> {
     fn publish_decision(&mut self, d: &concord_core::Decision, compute_ns: u64) {
         self.stats.decisions[d.source as usize] += 1;
         self.stats.fallbacks[d.fallback as usize] += 1;
-        let wire = WireDecision::from_decision(
+        let mut wire = WireDecision::from_decision(
             d,
             self.last_sequence,
             self.last_stamp_ns,
             now_ns(),
             compute_ns,
         );
+        if d.advice != AdviceVerdict::NoAdvice {
+            wire.advice_request_id = self.advice.map_or(0, |a| a.request_id);
+        }
         if iox::send(&self.ports.decision, &wire).is_err() {
             self.publish_failures += 1;
         }
@@ -518,6 +580,14 @@ pub fn render_stats(s: &CoreStats, out: &mut impl std::fmt::Write) {
     for v in AdviceVerdict::ALL {
         if s.advice_verdicts[v as usize] > 0 {
             let _ = write!(out, " {}={}", v.name(), s.advice_verdicts[v as usize]);
+        }
+    }
+    if s.advice_failures.iter().any(|&n| n > 0) {
+        let _ = write!(out, " | sidecar failures:");
+        for f in AdviceFailure::ALL {
+            if s.advice_failures[f as usize] > 0 {
+                let _ = write!(out, " {}={}", f.name(), s.advice_failures[f as usize]);
+            }
         }
     }
     let _ = write!(

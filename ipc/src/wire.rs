@@ -293,6 +293,8 @@ pub struct WireDecision {
     pub decided_ns: u64,
     /// Time the core step took, ns.
     pub compute_ns: u64,
+    /// Request id of the advice the gate weighed (0 when none): `advice` is its verdict.
+    pub advice_request_id: u64,
     /// P_n before (eq. 11) and after (eq. 15) correction, in `Maneuver` order.
     pub p_logit: [f64; 5],
     pub p_corrected: [f64; 5],
@@ -336,6 +338,7 @@ impl WireDecision {
             scene_stamp_ns,
             decided_ns,
             compute_ns,
+            advice_request_id: 0,
             p_logit: d.p_logit,
             p_corrected: d.p_corrected,
             trajectory,
@@ -564,7 +567,47 @@ pub struct WireAdvice {
     /// 1 when the sidecar produced a usable answer; 0 marks a failed request.
     pub valid: u8,
     pub n_agent_intents: u8,
-    pub reserved: [u8; 5],
+    /// [`AdviceFailure`] code when `valid` is 0.
+    pub failure: u8,
+    pub reserved: [u8; 4],
+}
+
+/// Why the sidecar could not answer a request; the index into [`CoreStats::advice_failures`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum AdviceFailure {
+    /// No reply before the deadline.
+    Timeout = 0,
+    /// The server refused or dropped the connection.
+    Connection = 1,
+    /// The server answered with an HTTP error status.
+    HttpStatus = 2,
+    /// The reply is not the JSON of a chat completion.
+    Malformed = 3,
+    /// The answer is JSON but breaks the schema (unknown enum value, missing field).
+    SchemaViolation = 4,
+}
+
+impl AdviceFailure {
+    pub const ALL: [AdviceFailure; 5] = [
+        AdviceFailure::Timeout,
+        AdviceFailure::Connection,
+        AdviceFailure::HttpStatus,
+        AdviceFailure::Malformed,
+        AdviceFailure::SchemaViolation,
+    ];
+    pub fn name(self) -> &'static str {
+        match self {
+            AdviceFailure::Timeout => "timeout",
+            AdviceFailure::Connection => "connection",
+            AdviceFailure::HttpStatus => "http_status",
+            AdviceFailure::Malformed => "malformed",
+            AdviceFailure::SchemaViolation => "schema_violation",
+        }
+    }
+    pub fn from_code(code: u8) -> Option<Self> {
+        Self::ALL.get(code as usize).copied()
+    }
 }
 
 /// Who wrote a text.
@@ -592,19 +635,51 @@ pub struct IntentText {
     pub text: [u8; TEXT_BYTES],
 }
 
-/// An eHMI message describing a decision, on `concord/ehmi`.
+/// Who an eHMI message is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Audience {
+    /// Everyone around the car (the external display).
+    Broadcast = 0,
+    /// One road user, by track id (`addressee`).
+    RoadUser = 1,
+    /// The passenger (the in-vehicle HMI).
+    Passenger = 2,
+}
+
+/// What an eHMI message does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum EhmiKind {
+    /// Announces the executed decision.
+    Decision = 0,
+    /// Asks a road user whose intent is unknown ("Do you intend to pass first?").
+    Inquiry = 1,
+    /// Answers a road user's message.
+    Reply = 2,
+    /// Asks the passenger to confirm a weak intent.
+    Confirmation = 3,
+}
+
+/// An eHMI message, on `concord/ehmi`: a decision announced, a question or a reply.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("ConcordEhmiMessage")]
 #[repr(C)]
 pub struct EhmiMessage {
-    /// The decision it describes.
+    /// The core cycle of the decision it describes (the newest one for questions and replies).
     pub decision_cycle: u64,
     pub stamp_ns: u64,
     /// Bytes used in `text` (at most [`EHMI_MAX_CHARS`] characters).
     pub len: u16,
-    /// `Maneuver` code the text describes.
+    /// `Maneuver` code of that decision.
     pub maneuver: u8,
-    pub reserved: [u8; 5],
+    /// [`Audience`] code.
+    pub audience: u8,
+    /// Track id of the road user addressed (audience `RoadUser`), else 0.
+    pub addressee: u32,
+    /// [`EhmiKind`] code.
+    pub kind: u8,
+    pub reserved: [u8; 7],
     pub text: [u8; TEXT_BYTES],
 }
 
@@ -643,7 +718,16 @@ impl IntentText {
 }
 
 impl EhmiMessage {
-    pub fn new(decision_cycle: u64, stamp_ns: u64, maneuver: Maneuver, text: &str) -> Self {
+    /// A message of `kind` for `audience`; `text` is cut to [`EHMI_MAX_CHARS`] characters.
+    pub fn new(
+        decision_cycle: u64,
+        stamp_ns: u64,
+        maneuver: Maneuver,
+        kind: EhmiKind,
+        audience: Audience,
+        addressee: u32,
+        text: &str,
+    ) -> Self {
         let cut: usize = text
             .char_indices()
             .nth(EHMI_MAX_CHARS)
@@ -654,7 +738,10 @@ impl EhmiMessage {
             stamp_ns,
             len: 0,
             maneuver: maneuver as u8,
-            reserved: [0; 5],
+            audience: audience as u8,
+            addressee,
+            kind: kind as u8,
+            reserved: [0; 7],
             text: [0; TEXT_BYTES],
         };
         m.len = write_text(&mut m.text, &text[..cut]);
@@ -735,6 +822,8 @@ pub struct CoreStats {
     /// Each received advice by the verdict of the first decision that weighed it
     /// (`AdviceVerdict` code).
     pub advice_verdicts: [u64; 8],
+    /// Requests the sidecar reported it could not answer, by [`AdviceFailure`] code.
+    pub advice_failures: [u64; 5],
     /// Whole-tick work time.
     pub cycle_ns: Percentiles,
     /// Scene stamp to the core's receipt.

@@ -1,0 +1,305 @@
+//! Configuration of `concord sidecar` (`deploy/sidecar.toml`): every key optional, unknown
+//! keys rejected.
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+/// How the scene is written into the advice prompt (paper §6.1.3).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PromptFormat {
+    /// Objects, processes and relations (eq. 6), with saliency.
+    #[default]
+    Opm,
+    /// Unstructured numeric perception output with history.
+    Raw,
+    /// Flat fields, no object–process–relation structure.
+    Simple,
+}
+
+impl PromptFormat {
+    pub const ALL: [PromptFormat; 3] = [PromptFormat::Opm, PromptFormat::Raw, PromptFormat::Simple];
+    pub fn name(self) -> &'static str {
+        match self {
+            PromptFormat::Opm => "opm",
+            PromptFormat::Raw => "raw",
+            PromptFormat::Simple => "simple",
+        }
+    }
+}
+
+/// The LLM server.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LlmConfig {
+    /// Base URL of an OpenAI-compatible API (ending in `/v1`).
+    pub base_url: String,
+    /// Model name sent with each request.
+    pub model: String,
+    /// Name of the environment variable holding the API key (sent as a bearer token); empty:
+    /// no key.
+    pub api_key_env: String,
+    /// TCP connect timeout, s.
+    pub connect_timeout_s: f64,
+    /// Longest time one HTTP attempt may take, s (the request's deadline cuts it shorter).
+    pub request_timeout_s: f64,
+    /// Requests in flight at once, over advice and intents.
+    pub max_in_flight: usize,
+    /// An attempt is not started with less than this left before the deadline, s.
+    pub min_attempt_s: f64,
+    /// Pause before a retry, s.
+    pub retry_backoff_s: f64,
+    /// Ask for token log-probabilities (the confidence source).
+    pub logprobs: bool,
+    /// Confidence given to an answer when the server sent no log-probabilities; below the
+    /// core's 0.7 gate by default, so such advice is never applied.
+    pub confidence_without_logprobs: f64,
+    /// Sampling temperature.
+    pub temperature: f64,
+}
+
+impl Default for LlmConfig {
+    fn default() -> Self {
+        LlmConfig {
+            base_url: "http://127.0.0.1:8181/v1".into(),
+            model: "SmolLM2-135M-Instruct.Q4_1".into(),
+            api_key_env: String::new(),
+            connect_timeout_s: 0.5,
+            request_timeout_s: 10.0,
+            max_in_flight: 2,
+            min_attempt_s: 0.2,
+            retry_backoff_s: 0.05,
+            logprobs: true,
+            confidence_without_logprobs: 0.5,
+            temperature: 0.0,
+        }
+    }
+}
+
+/// Advice requests (eq. 16).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AdviceConfig {
+    /// Scene rendering in the prompt.
+    pub prompt_format: PromptFormat,
+    /// Scene history in the Raw rendering, s.
+    pub raw_history_s: f64,
+    /// Reasoning steps asked for (0: none; each costs generation time).
+    pub reasoning_steps: usize,
+    /// Most tokens generated per answer.
+    pub max_tokens: u32,
+}
+
+impl Default for AdviceConfig {
+    fn default() -> Self {
+        AdviceConfig {
+            prompt_format: PromptFormat::Opm,
+            raw_history_s: 0.4,
+            reasoning_steps: 0,
+            max_tokens: 64,
+        }
+    }
+}
+
+/// Intents from language (eq. 8, §4.3).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct IntentConfig {
+    /// Below this confidence an intent is weak: flagged and not used.
+    pub weak_below: f64,
+    /// Longest message accepted from a road user or the passenger, characters; longer text is
+    /// cut.
+    pub max_text_chars: usize,
+    /// Time allowed for parsing one message, s.
+    pub deadline_s: f64,
+    /// Dialogue turns kept per road user and shown to the model.
+    pub dialogue_turns: usize,
+    /// Road users remembered at once (the oldest are forgotten).
+    pub max_parties: usize,
+}
+
+impl Default for IntentConfig {
+    fn default() -> Self {
+        IntentConfig {
+            weak_below: 0.7,
+            max_text_chars: 200,
+            deadline_s: 3.0,
+            dialogue_turns: 4,
+            max_parties: 32,
+        }
+    }
+}
+
+/// eHMI messages (§5).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EhmiConfig {
+    /// An unchanged decision is announced again after this long, s.
+    pub repeat_s: f64,
+    /// A road user of unknown intent is asked again after this long, s.
+    pub inquiry_interval_s: f64,
+    /// Ask the model to phrase each new decision (the template is shown until its text
+    /// arrives and passes the check).
+    pub llm_phrasing: bool,
+}
+
+impl Default for EhmiConfig {
+    fn default() -> Self {
+        EhmiConfig {
+            repeat_s: 2.0,
+            inquiry_interval_s: 8.0,
+            llm_phrasing: true,
+        }
+    }
+}
+
+/// The interaction log (JSONL, one object per LLM call and per verdict).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LogConfig {
+    /// File; empty disables the log.
+    pub path: PathBuf,
+    /// Size at which the file is rotated, bytes.
+    pub max_bytes: u64,
+    /// Rotated files kept (`.1` newest).
+    pub keep: usize,
+}
+
+impl Default for LogConfig {
+    fn default() -> Self {
+        LogConfig {
+            path: PathBuf::from("concord-interactions.jsonl"),
+            max_bytes: 64 << 20,
+            keep: 4,
+        }
+    }
+}
+
+/// The whole file.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SidecarConfig {
+    /// Prefix of every service name.
+    pub prefix: String,
+    /// Period of the statistics line on stderr, s (0: only on exit).
+    pub print_period_s: f64,
+    pub llm: LlmConfig,
+    pub advice: AdviceConfig,
+    pub intent: IntentConfig,
+    pub ehmi: EhmiConfig,
+    pub log: LogConfig,
+}
+
+impl Default for SidecarConfig {
+    fn default() -> Self {
+        SidecarConfig {
+            prefix: concord_ipc::services::DEFAULT_PREFIX.into(),
+            print_period_s: 10.0,
+            llm: LlmConfig::default(),
+            advice: AdviceConfig::default(),
+            intent: IntentConfig::default(),
+            ehmi: EhmiConfig::default(),
+            log: LogConfig::default(),
+        }
+    }
+}
+
+impl SidecarConfig {
+    /// Reads `path` over the defaults.
+    pub fn load(path: &std::path::Path) -> Result<Self, String> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("reading {}: {e}", path.display()))?;
+        Self::parse(&text).map_err(|e| format!("{}: {e}", path.display()))
+    }
+
+    /// Parses TOML (missing keys take their defaults) and validates it.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let cfg: SidecarConfig = toml::from_str(text).map_err(|e| e.to_string())?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// Checks ranges.
+    pub fn validate(&self) -> Result<(), String> {
+        let l = &self.llm;
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !l.base_url.starts_with("http://") && !l.base_url.starts_with("https://") {
+            return Err(format!(
+                "llm.base_url = {:?}: expected http(s)://…",
+                l.base_url
+            ));
+        }
+        if !(positive(l.connect_timeout_s) && positive(l.request_timeout_s)) {
+            return Err("llm.connect_timeout_s and llm.request_timeout_s must be > 0".into());
+        }
+        if l.max_in_flight == 0 {
+            return Err("llm.max_in_flight must be >= 1".into());
+        }
+        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+        if !(non_negative(l.min_attempt_s) && non_negative(l.retry_backoff_s)) {
+            return Err("llm.min_attempt_s and llm.retry_backoff_s must be >= 0".into());
+        }
+        if !(0.0..=1.0).contains(&l.confidence_without_logprobs) {
+            return Err("llm.confidence_without_logprobs must be in [0, 1]".into());
+        }
+        if !(l.temperature.is_finite() && (0.0..=2.0).contains(&l.temperature)) {
+            return Err("llm.temperature must be in [0, 2]".into());
+        }
+        if !(self.advice.raw_history_s.is_finite()
+            && (0.0..=5.0).contains(&self.advice.raw_history_s))
+        {
+            return Err("advice.raw_history_s must be in [0, 5]".into());
+        }
+        if self.advice.reasoning_steps > 8 || self.advice.max_tokens < 16 {
+            return Err("advice.reasoning_steps must be <= 8 and advice.max_tokens >= 16".into());
+        }
+        let i = &self.intent;
+        if !(0.0..=1.0).contains(&i.weak_below) || i.max_text_chars == 0 || !positive(i.deadline_s)
+        {
+            return Err(
+                "intent.weak_below in [0, 1], intent.max_text_chars >= 1, intent.deadline_s > 0"
+                    .into(),
+            );
+        }
+        if i.max_parties == 0 {
+            return Err("intent.max_parties must be >= 1".into());
+        }
+        if !(positive(self.ehmi.repeat_s) && positive(self.ehmi.inquiry_interval_s)) {
+            return Err("ehmi.repeat_s and ehmi.inquiry_interval_s must be > 0".into());
+        }
+        if self.log.max_bytes < 4096 {
+            return Err("log.max_bytes must be >= 4096".into());
+        }
+        if !(self.print_period_s.is_finite() && self.print_period_s >= 0.0) {
+            return Err("print_period_s must be >= 0".into());
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_shipped_file_is_the_defaults() {
+        let text = include_str!("../../deploy/sidecar.toml");
+        assert_eq!(
+            SidecarConfig::parse(text).unwrap(),
+            SidecarConfig::default()
+        );
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_values_are_refused() {
+        assert!(SidecarConfig::parse("[llm]\nbase_urll = \"x\"")
+            .unwrap_err()
+            .contains("base_urll"));
+        assert!(SidecarConfig::parse("[llm]\nbase_url = \"ftp://x\"").is_err());
+        assert!(SidecarConfig::parse("[advice]\nprompt_format = \"yaml\"").is_err());
+        let c = SidecarConfig::parse("[advice]\nprompt_format = \"raw\"").unwrap();
+        assert_eq!(c.advice.prompt_format, PromptFormat::Raw);
+        assert_eq!(c.llm, LlmConfig::default());
+    }
+}

@@ -1,0 +1,767 @@
+//! The sidecar's async side: answers advice requests (eq. 16), parses intents from what people
+//! say (eq. 8, §4.3), and turns decisions into eHMI language (§5).
+//!
+//! * **Advice.** One request at a time, the newest: while a request is in flight, a newer one
+//!   that describes a different situation (another logit favourite, another set of risky
+//!   conflicts, another passenger intent) cancels it; a newer one of the same situation waits.
+//!   Every answer, or failure with its reason, is published with the request id and the
+//!   intents known so far, which is how intents reach the core.
+//! * **Intents.** Each message is parsed with the dialogue so far; a weak intent (< 0.7) is
+//!   flagged and sent with its low confidence, which the core ignores; a weak passenger intent
+//!   brings a confirmatory question. Road users get a reply checked against what the car does.
+//! * **eHMI.** Each change of decision (and every `repeat_s`) is announced; the model's text is
+//!   used only for the maneuver it was written for and only if it passes [`ehmi::check`].
+//!   Road users in a risky conflict whose intent is unknown are asked "Do you intend to pass
+//!   first?", at most once per `inquiry_interval_s`.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::fmt::Write as _;
+use std::future::Future;
+use std::pin::Pin;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{mpsc as std_mpsc, Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use concord_core::scene::{IntentAction, Style};
+use concord_core::{DecisionSource, Maneuver};
+use concord_ipc::clock::now_ns;
+use concord_ipc::wire::{
+    AdviceFailure, AdviceRequest, Audience, EhmiKind, EhmiMessage, IntentText, TextSource,
+    WireAdvice, WireAgentIntent, WireDecision, WireIntent, UNKNOWN, WIRE_OBJECTS,
+};
+use hdrhistogram::Histogram;
+use serde_json::json;
+use tokio::sync::{mpsc, watch, Semaphore};
+
+use crate::bus::{History, Outbound};
+use crate::config::SidecarConfig;
+use crate::ehmi::{self, Dialogue, Stance};
+use crate::interaction_log::InteractionLog;
+use crate::llm::{LlmClient, LlmError};
+use crate::prompt::{self, Utterance};
+use crate::schema::{self, AdviceAnswer, IntentAnswer};
+
+/// Utterances kept for the advice prompt.
+const SAID_KEPT: usize = 8;
+/// The bus publishes up to one period after the answer: leave that much before the deadline.
+const PUBLISH_MARGIN: Duration = Duration::from_millis(20);
+
+/// Counters, printed periodically and on exit.
+#[derive(Debug, Default, Clone)]
+pub struct Counters {
+    pub requests_taken: u64,
+    pub requests_too_late: u64,
+    pub cancelled: u64,
+    pub answered: u64,
+    pub failures: [u64; 5],
+    pub texts: u64,
+    pub texts_unreadable: u64,
+    pub intents_parsed: u64,
+    pub intents_weak: u64,
+    pub intent_failures: u64,
+    pub ehmi_sent: u64,
+    /// Announcements in the model's words, and the model's texts refused by the check.
+    pub ehmi_phrased: u64,
+    pub ehmi_replaced: u64,
+    pub phrase_failures: u64,
+    pub inquiries: u64,
+    pub confirmations: u64,
+    pub replies: u64,
+    pub verdicts: [u64; 8],
+}
+
+struct Party {
+    intent: WireIntent,
+    heard: Instant,
+}
+
+/// State shared by the workers (never held across an await).
+struct State {
+    dialogue: Dialogue,
+    /// Intents parsed from road users' words, by track id.
+    road_users: BTreeMap<u32, Party>,
+    /// The passenger's parsed intent.
+    passenger: WireIntent,
+    said: VecDeque<Utterance>,
+    /// The newest request seen by any worker.
+    request: Option<AdviceRequest>,
+    decision: Option<WireDecision>,
+    /// Request id of the newest published advice, for matching the core's verdict.
+    published: Option<u64>,
+    log: InteractionLog,
+    counters: Counters,
+    latency_ms: Histogram<u64>,
+    prompt_tokens: Histogram<u64>,
+}
+
+/// The async side.
+pub struct Sidecar {
+    cfg: SidecarConfig,
+    client: LlmClient,
+    slots: Semaphore,
+    state: Mutex<State>,
+    out: std_mpsc::Sender<Outbound>,
+    history: History,
+    texts_dropped: Arc<AtomicU64>,
+}
+
+/// An eHMI phrasing in flight.
+type Phrasing<'a> = Pin<Box<dyn Future<Output = Result<String, String>> + 'a>>;
+
+/// What makes two requests the same situation for the model.
+fn situation(r: &AdviceRequest) -> (usize, Vec<u32>, u8, u8) {
+    let favourite = r
+        .p_corrected
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map_or(0, |(i, _)| i);
+    let mut risky: Vec<u32> = r.conflicts[..(r.n_conflicts as usize).min(WIRE_OBJECTS)]
+        .iter()
+        .filter(|c| c.risky != 0)
+        .map(|c| c.agent_id)
+        .collect();
+    risky.sort_unstable();
+    (favourite, risky, r.ego_intent.action, r.ego_intent.task)
+}
+
+fn stance_of(d: &WireDecision) -> Option<(Maneuver, Stance, bool)> {
+    let (m, source, _, _) = d.decode()?;
+    let stopping = source == DecisionSource::MinimumRisk;
+    Some((m, Stance::of(m, stopping), stopping))
+}
+
+impl Sidecar {
+    pub fn new(
+        cfg: SidecarConfig,
+        client: LlmClient,
+        log: InteractionLog,
+        out: std_mpsc::Sender<Outbound>,
+        history: History,
+        texts_dropped: Arc<AtomicU64>,
+    ) -> Self {
+        let hist = |hi| Histogram::new_with_bounds(1, hi, 2).expect("histogram bounds");
+        Sidecar {
+            slots: Semaphore::new(cfg.llm.max_in_flight),
+            state: Mutex::new(State {
+                dialogue: Dialogue::new(cfg.intent.dialogue_turns, cfg.intent.max_parties),
+                road_users: BTreeMap::new(),
+                passenger: WireIntent::default(),
+                said: VecDeque::new(),
+                request: None,
+                decision: None,
+                published: None,
+                log,
+                counters: Counters::default(),
+                latency_ms: hist(600_000),
+                prompt_tokens: hist(1_000_000),
+            }),
+            cfg,
+            client,
+            out,
+            history,
+            texts_dropped,
+        }
+    }
+
+    fn state(&self) -> std::sync::MutexGuard<'_, State> {
+        self.state.lock().expect("sidecar state lock")
+    }
+
+    /// A copy of the counters.
+    pub fn counters(&self) -> Counters {
+        self.state().counters.clone()
+    }
+
+    /// Advice latency percentiles (p50, p95, max, ms) and mean prompt tokens.
+    pub fn latency(&self) -> ([u64; 3], f64) {
+        let s = self.state();
+        let h = &s.latency_ms;
+        if h.is_empty() {
+            return ([0; 3], 0.0);
+        }
+        (
+            [h.value_at_quantile(0.5), h.value_at_quantile(0.95), h.max()],
+            s.prompt_tokens.mean(),
+        )
+    }
+
+    fn publish(&self, o: Outbound) {
+        let _ = self.out.send(o);
+    }
+
+    /// Intents known now, as carried by every advice.
+    fn intents(&self, s: &State) -> (WireIntent, [WireAgentIntent; WIRE_OBJECTS], u8) {
+        let mut agents = [WireAgentIntent::default(); WIRE_OBJECTS];
+        let mut newest: Vec<_> = s.road_users.iter().collect();
+        newest.sort_by_key(|(_, p)| std::cmp::Reverse(p.heard));
+        let n = newest.len().min(WIRE_OBJECTS);
+        for (w, (id, p)) in agents.iter_mut().zip(newest) {
+            *w = WireAgentIntent {
+                intent: p.intent,
+                agent_id: *id,
+                reserved: [0; 4],
+            };
+        }
+        (s.passenger, agents, n as u8)
+    }
+
+    // ---- advice -------------------------------------------------------------------------
+
+    /// Serves advice requests until the bus closes.
+    pub async fn advice_worker(&self, mut rx: watch::Receiver<Option<AdviceRequest>>) {
+        'next: loop {
+            if rx.changed().await.is_err() {
+                return;
+            }
+            let Some(req) = *rx.borrow_and_update() else {
+                continue;
+            };
+            self.state().request = Some(req);
+            let left = Duration::from_nanos(req.deadline_ns.saturating_sub(now_ns()));
+            let Some(left) = left.checked_sub(PUBLISH_MARGIN) else {
+                self.state().counters.requests_too_late += 1;
+                continue;
+            };
+            if left < Duration::from_secs_f64(self.cfg.llm.min_attempt_s) {
+                self.state().counters.requests_too_late += 1;
+                continue;
+            }
+            self.state().counters.requests_taken += 1;
+            let here = situation(&req);
+            let work = self.advise(req, Instant::now() + left);
+            tokio::pin!(work);
+            loop {
+                tokio::select! {
+                    () = &mut work => continue 'next,
+                    changed = rx.changed() => {
+                        if changed.is_err() {
+                            return;
+                        }
+                        let newer = *rx.borrow();
+                        if let Some(n) = newer {
+                            self.state().request = Some(n);
+                            if situation(&n) != here {
+                                self.state().counters.cancelled += 1;
+                                // Unseen: the outer loop takes it at once.
+                                rx.mark_changed();
+                                continue 'next;
+                            }
+                        }
+                        rx.borrow_and_update();
+                    }
+                }
+            }
+        }
+    }
+
+    async fn advise(&self, req: AdviceRequest, deadline: Instant) {
+        let format = self.cfg.advice.prompt_format;
+        let messages = {
+            let said: Vec<Utterance> = self.state().said.iter().cloned().collect();
+            let history: Vec<_> = self
+                .history
+                .lock()
+                .expect("history lock")
+                .iter()
+                .copied()
+                .collect();
+            prompt::advice_messages(
+                format,
+                self.cfg.advice.reasoning_steps,
+                &req,
+                &history,
+                &said,
+                self.cfg.intent.max_text_chars,
+            )
+        };
+        let body = self.client.body(
+            &messages,
+            "advice",
+            &schema::advice_schema(self.cfg.advice.reasoning_steps),
+            self.cfg.advice.max_tokens,
+        );
+        let result = match self.slot(deadline).await {
+            Some(_permit) => self.client.call(&body, deadline).await,
+            None => Err(LlmError::Timeout),
+        };
+        let decoded = result.and_then(|r| {
+            AdviceAnswer::decode(&r.answer)
+                .map(|a| (a, r))
+                .map_err(LlmError::Reply)
+        });
+        let mut s = self.state();
+        let (ego_intent, agent_intents, n_agent_intents) = self.intents(&s);
+        let mut advice = WireAdvice {
+            request_id: req.request_id,
+            created_ns: now_ns(),
+            confidence: 0.0,
+            ego_intent,
+            agent_intents,
+            maneuver: UNKNOWN,
+            valid: 0,
+            n_agent_intents,
+            failure: 0,
+            reserved: [0; 4],
+        };
+        let record = match &decoded {
+            Ok((a, r)) => {
+                let confidence = a
+                    .confidence
+                    .unwrap_or(self.cfg.llm.confidence_without_logprobs);
+                advice.confidence = confidence;
+                advice.maneuver = a.maneuver as u8;
+                advice.valid = 1;
+                s.counters.answered += 1;
+                s.latency_ms
+                    .saturating_record(r.latency.as_millis().max(1) as u64);
+                s.prompt_tokens
+                    .saturating_record(u64::from(r.answer.usage.prompt_tokens).max(1));
+                json!({"outcome": "answered", "maneuver": a.maneuver.name(),
+                       "confidence": confidence, "confidence_from_logprobs": a.confidence.is_some(),
+                       "steps": a.steps, "latency_ms": r.latency.as_secs_f64() * 1e3,
+                       "attempts": r.attempts, "usage": r.answer.usage, "response": r.answer.content})
+            }
+            Err(e) => {
+                let f = e.failure();
+                advice.failure = f as u8;
+                s.counters.failures[f as usize] += 1;
+                json!({"outcome": "failed", "failure": f.name(), "error": e.to_string()})
+            }
+        };
+        s.published = Some(req.request_id);
+        let mut line = json!({"kind": "advice", "request_id": req.request_id,
+                              "format": format.name(), "messages": messages,
+                              "p_corrected": req.p_corrected});
+        merge(&mut line, record);
+        s.log.write(&line);
+        drop(s);
+        self.publish(Outbound::Advice(advice));
+    }
+
+    /// A request slot, or `None` if none frees up before `deadline`.
+    async fn slot(&self, deadline: Instant) -> Option<tokio::sync::SemaphorePermit<'_>> {
+        tokio::time::timeout_at(deadline.into(), self.slots.acquire())
+            .await
+            .ok()?
+            .ok()
+    }
+
+    // ---- intents ------------------------------------------------------------------------
+
+    /// Parses texts until the bus closes.
+    pub async fn text_worker(&self, mut rx: mpsc::Receiver<IntentText>) {
+        while let Some(t) = rx.recv().await {
+            self.on_text(&t).await;
+        }
+    }
+
+    async fn on_text(&self, t: &IntentText) {
+        let now = Instant::now();
+        self.state().counters.texts += 1;
+        let (Some(text), Some(source)) = (
+            t.text(),
+            [TextSource::Passenger, TextSource::RoadUser]
+                .into_iter()
+                .find(|s| *s as u8 == t.source),
+        ) else {
+            self.state().counters.texts_unreadable += 1;
+            return;
+        };
+        let max = self.cfg.intent.max_text_chars;
+        let text = prompt::sanitise(text, max);
+        let (from, speaker) = match source {
+            TextSource::Passenger => (None, "The passenger".to_string()),
+            TextSource::RoadUser => (Some(t.source_id), format!("Road user {}", t.source_id)),
+        };
+        let messages = {
+            let mut s = self.state();
+            let turns: Vec<(bool, String)> = s
+                .dialogue
+                .party(from)
+                .map(|p| p.turns.iter().cloned().collect())
+                .unwrap_or_default();
+            s.dialogue.say(from, false, &text, now);
+            s.said.retain(|u| u.from != from);
+            s.said.push_back(Utterance {
+                from,
+                text: text.clone(),
+            });
+            while s.said.len() > SAID_KEPT {
+                s.said.pop_front();
+            }
+            prompt::intent_messages(&speaker, &turns, &text, max)
+        };
+        let deadline = now + Duration::from_secs_f64(self.cfg.intent.deadline_s);
+        let body = self
+            .client
+            .body(&messages, "intent", &schema::intent_schema(), 96);
+        let result = match self.slot(deadline).await {
+            Some(_permit) => self.client.call(&body, deadline).await,
+            None => Err(LlmError::Timeout),
+        };
+        let decoded = result.and_then(|r| {
+            IntentAnswer::decode(&r.answer, self.cfg.llm.confidence_without_logprobs)
+                .map(|a| (a, r))
+                .map_err(LlmError::Reply)
+        });
+        let mut s = self.state();
+        let mut line = json!({"kind": "intent", "source": speaker, "messages": messages});
+        match decoded {
+            Err(e) => {
+                s.counters.intent_failures += 1;
+                merge(
+                    &mut line,
+                    json!({"outcome": "failed", "error": e.to_string()}),
+                );
+            }
+            Ok((a, r)) => {
+                let weak = a.weak(self.cfg.intent.weak_below);
+                s.counters.intents_parsed += 1;
+                s.counters.intents_weak += u64::from(weak);
+                let strong_style = a
+                    .style
+                    .filter(|(_, c)| *c >= self.cfg.intent.weak_below)
+                    .map(|(v, _)| v);
+                s.dialogue.set_style(from, strong_style, now);
+                let wire = a.to_wire();
+                let said = match from {
+                    None => {
+                        s.passenger = wire;
+                        let unclear = a.action.is_none_or(|(_, c)| c < self.cfg.intent.weak_below);
+                        unclear.then(|| {
+                            let q = ehmi::confirmation(a.action.map(|(v, _)| v));
+                            s.counters.confirmations += 1;
+                            (
+                                EhmiKind::Confirmation,
+                                Audience::Passenger,
+                                0,
+                                q.to_string(),
+                                None,
+                            )
+                        })
+                    }
+                    Some(id) => {
+                        s.road_users.insert(
+                            id,
+                            Party {
+                                intent: wire,
+                                heard: now,
+                            },
+                        );
+                        while s.road_users.len() > self.cfg.intent.max_parties {
+                            let oldest = s
+                                .road_users
+                                .iter()
+                                .min_by_key(|(_, p)| p.heard)
+                                .map(|(k, _)| *k);
+                            if let Some(k) = oldest {
+                                s.road_users.remove(&k);
+                            }
+                        }
+                        let stance = s.decision.as_ref().and_then(stance_of);
+                        stance.map(|(_, stance, stopping)| {
+                            let style = s.dialogue.party(from).and_then(|p| p.style);
+                            let (text, refusal) =
+                                ehmi::compose(Some(&a.reply), stance, stopping, style);
+                            s.counters.replies += 1;
+                            s.counters.ehmi_replaced += u64::from(refusal.is_some());
+                            (EhmiKind::Reply, Audience::RoadUser, id, text, refusal)
+                        })
+                    }
+                };
+                merge(
+                    &mut line,
+                    json!({"outcome": "parsed", "weak": weak, "response": r.answer.content,
+                           "latency_ms": r.latency.as_secs_f64() * 1e3, "usage": r.answer.usage,
+                           "intent": {"style": a.style.map(|(v, c)| (schema::style_name(v), c)),
+                                      "action": a.action.map(|(v, c)| (schema::action_name(v), c)),
+                                      "task": a.task.map(|(v, c)| (schema::task_name(v), c))}}),
+                );
+                if let Some((kind, audience, id, text, refusal)) = said {
+                    s.dialogue.say(from, true, &text, now);
+                    merge(
+                        &mut line,
+                        json!({"sent": text, "model_reply_refused": refusal.map(|r| format!("{r:?}"))}),
+                    );
+                    let msg = self.message(&s, kind, audience, id, &text);
+                    drop(s);
+                    self.publish(Outbound::Ehmi(msg));
+                    self.state().log.write(&line);
+                    return;
+                }
+            }
+        }
+        s.log.write(&line);
+    }
+
+    fn message(
+        &self,
+        s: &State,
+        kind: EhmiKind,
+        audience: Audience,
+        addressee: u32,
+        text: &str,
+    ) -> EhmiMessage {
+        let (cycle, maneuver) = s
+            .decision
+            .as_ref()
+            .and_then(|d| Some((d.cycle, Maneuver::try_from(d.maneuver).ok()?)))
+            .unwrap_or((0, Maneuver::KeepSpeed));
+        EhmiMessage::new(cycle, now_ns(), maneuver, kind, audience, addressee, text)
+    }
+
+    // ---- eHMI ---------------------------------------------------------------------------
+
+    /// Announces decisions and asks road users of unknown intent, until the bus closes. A
+    /// change of decision is announced at once with the template; the model's phrasing of it,
+    /// when it arrives and passes the check while the decision still holds, follows.
+    pub async fn ehmi_worker(&self, mut rx: watch::Receiver<Option<WireDecision>>) {
+        let repeat = Duration::from_secs_f64(self.cfg.ehmi.repeat_s);
+        // The decision announced last (maneuver, stopping), when, and the model's text for it.
+        let mut last: Option<(Maneuver, bool, Instant)> = None;
+        let mut phrased: Option<String> = None;
+        let mut phrasing: Option<Phrasing<'_>> = None;
+        loop {
+            let pending = async {
+                match phrasing.as_mut() {
+                    Some(f) => f.await,
+                    None => std::future::pending().await,
+                }
+            };
+            tokio::select! {
+                changed = rx.changed() => {
+                    if changed.is_err() {
+                        return;
+                    }
+                    let Some(d) = *rx.borrow_and_update() else { continue };
+                    let Some((maneuver, stance, stopping)) = stance_of(&d) else { continue };
+                    let now = Instant::now();
+                    let changed = last.is_none_or(|(m, st, _)| m != maneuver || st != stopping);
+                    let due = changed || last.is_some_and(|(_, _, t)| now.duration_since(t) >= repeat);
+                    if changed {
+                        phrased = None;
+                        phrasing = None;
+                    }
+                    let style = {
+                        let mut s = self.state();
+                        s.decision = Some(d);
+                        self.note_verdict(&mut s, &d);
+                        self.addressed_style(&s)
+                    };
+                    if due {
+                        last = Some((maneuver, stopping, now));
+                        let (text, _) = ehmi::compose(phrased.as_deref(), stance, stopping, style);
+                        self.announce(&text);
+                    }
+                    if changed && self.cfg.ehmi.llm_phrasing {
+                        let doing = ehmi::describe(maneuver, stopping);
+                        phrasing = Some(Box::pin(self.phrase(doing, ehmi::tone(style))));
+                    }
+                    self.inquire(now);
+                }
+                result = pending => {
+                    phrasing = None;
+                    let Some((maneuver, stopping, _)) = last else { continue };
+                    let stance = Stance::of(maneuver, stopping);
+                    let mut s = self.state();
+                    match result {
+                        Ok(text) => match ehmi::check(&text, stance) {
+                            Ok(()) if !stopping => {
+                                s.counters.ehmi_phrased += 1;
+                                phrased = Some(text.trim().to_string());
+                                drop(s);
+                                self.announce(&text);
+                            }
+                            verdict => {
+                                s.counters.ehmi_replaced += 1;
+                                let line = json!({"kind": "ehmi_refused", "maneuver": maneuver.name(),
+                                                  "proposed": text, "reason": format!("{:?}", verdict.err())});
+                                s.log.write(&line);
+                            }
+                        },
+                        Err(e) => s.counters.phrase_failures += u64::from(!e.is_empty()),
+                    }
+                }
+            }
+        }
+    }
+
+    /// Publishes `text` as the announcement of the newest decision.
+    fn announce(&self, text: &str) {
+        let mut s = self.state();
+        s.counters.ehmi_sent += 1;
+        let m = self.message(&s, EhmiKind::Decision, Audience::Broadcast, 0, text);
+        drop(s);
+        self.publish(Outbound::Ehmi(m));
+    }
+
+    /// Asks road users in a risky conflict whose intent is unknown whether they go first.
+    fn inquire(&self, now: Instant) {
+        let interval = Duration::from_secs_f64(self.cfg.ehmi.inquiry_interval_s);
+        let mut out = Vec::new();
+        {
+            let mut s = self.state();
+            for id in self.unknown_parties(&s) {
+                if s.dialogue.should_inquire(id, now, interval) {
+                    s.counters.inquiries += 1;
+                    out.push(self.message(
+                        &s,
+                        EhmiKind::Inquiry,
+                        Audience::RoadUser,
+                        id,
+                        ehmi::INQUIRY,
+                    ));
+                }
+            }
+        }
+        for m in out {
+            self.publish(Outbound::Ehmi(m));
+        }
+    }
+
+    /// The model's eHMI text for a decision (§5 step 2), logged; `Err` carries the failure.
+    async fn phrase(&self, doing: &'static str, tone: &'static str) -> Result<String, String> {
+        let messages = prompt::phrase_messages(doing, tone);
+        let deadline = Instant::now() + Duration::from_secs_f64(self.cfg.intent.deadline_s);
+        let body = self
+            .client
+            .body(&messages, "ehmi", &schema::phrase_schema(), 48);
+        let result = match self.slot(deadline).await {
+            Some(_permit) => self.client.call(&body, deadline).await,
+            None => Err(LlmError::Timeout),
+        };
+        let decoded = result.and_then(|r| {
+            r.answer
+                .decode::<schema::Phrase>()
+                .map(|p| (p.text, r))
+                .map_err(LlmError::Reply)
+        });
+        let mut line = json!({"kind": "ehmi", "messages": messages});
+        let out = match decoded {
+            Ok((text, r)) => {
+                merge(
+                    &mut line,
+                    json!({"outcome": "answered", "response": r.answer.content,
+                                        "latency_ms": r.latency.as_secs_f64() * 1e3, "usage": r.answer.usage}),
+                );
+                Ok(text)
+            }
+            Err(e) => {
+                merge(
+                    &mut line,
+                    json!({"outcome": "failed", "error": e.to_string()}),
+                );
+                Err(e.to_string())
+            }
+        };
+        self.state().log.write(&line);
+        out
+    }
+
+    /// Records the core's verdict on the newest published advice, once.
+    fn note_verdict(&self, s: &mut State, d: &WireDecision) {
+        if d.advice == 0 || s.published != Some(d.advice_request_id) {
+            return;
+        }
+        let id = s.published.take();
+        if let Some(v) = s.counters.verdicts.get_mut(d.advice as usize) {
+            *v += 1;
+        }
+        let verdict = concord_core::AdviceVerdict::try_from(d.advice)
+            .map(|v| v.name())
+            .unwrap_or("unknown");
+        s.log.write(&json!({"kind": "verdict", "request_id": id, "cycle": d.cycle,
+                            "verdict": verdict, "executed": Maneuver::try_from(d.maneuver).map(|m| m.name()).unwrap_or("?")}));
+    }
+
+    /// Style of the most salient road user in a conflict: from their words, else their signals.
+    fn addressed_style(&self, s: &State) -> Option<Style> {
+        let r = s.request.as_ref()?;
+        let n = (r.n_objects as usize).min(WIRE_OBJECTS);
+        let o = r.objects[..n]
+            .iter()
+            .filter(|o| o.conflict != UNKNOWN)
+            .max_by(|a, b| a.saliency.total_cmp(&b.saliency))?;
+        let id = o.state.id;
+        s.dialogue
+            .party(Some(id))
+            .and_then(|p| p.style)
+            .or_else(|| {
+                (o.state.intent.style_confidence as f64 >= self.cfg.intent.weak_below)
+                    .then(|| Style::try_from(o.state.intent.style).ok())
+                    .flatten()
+            })
+    }
+
+    /// Road users in a risky conflict whose action is unknown (or weak).
+    fn unknown_parties(&self, s: &State) -> Vec<u32> {
+        let Some(r) = s.request.as_ref() else {
+            return Vec::new();
+        };
+        let strong = |i: &WireIntent| {
+            IntentAction::try_from(i.action).is_ok()
+                && i.action_confidence as f64 >= self.cfg.intent.weak_below
+        };
+        r.conflicts[..(r.n_conflicts as usize).min(WIRE_OBJECTS)]
+            .iter()
+            .filter(|c| c.risky != 0)
+            .map(|c| c.agent_id)
+            .filter(|id| {
+                let from_frame = r.objects[..(r.n_objects as usize).min(WIRE_OBJECTS)]
+                    .iter()
+                    .any(|o| o.state.id == *id && strong(&o.state.intent));
+                let from_words = s.road_users.get(id).is_some_and(|p| strong(&p.intent));
+                !from_frame && !from_words
+            })
+            .collect()
+    }
+
+    /// One line of counters.
+    pub fn render(&self) -> String {
+        let c = self.counters();
+        let ([p50, p95, max], tokens) = self.latency();
+        let mut out = format!(
+            "requests {} taken, {} too late, {} cancelled | answered {} (latency ms p50 {p50} p95 {p95} max {max}, prompt {tokens:.0} tokens) | failures",
+            c.requests_taken, c.requests_too_late, c.cancelled, c.answered
+        );
+        for f in AdviceFailure::ALL {
+            let _ = write!(out, " {}={}", f.name(), c.failures[f as usize]);
+        }
+        let _ = write!(out, " | core verdicts:");
+        for v in concord_core::AdviceVerdict::ALL.iter().skip(1) {
+            if c.verdicts[*v as usize] > 0 {
+                let _ = write!(out, " {}={}", v.name(), c.verdicts[*v as usize]);
+            }
+        }
+        let _ = write!(
+            out,
+            " | texts {} (unreadable {}, dropped {}), intents {} (weak {}, failed {}) | eHMI {} ({} in the model's words, {} refused, {} phrasing failures), inquiries {}, replies {}, confirmations {}",
+            c.texts,
+            c.texts_unreadable,
+            self.texts_dropped.load(Ordering::Relaxed),
+            c.intents_parsed,
+            c.intents_weak,
+            c.intent_failures,
+            c.ehmi_sent,
+            c.ehmi_phrased,
+            c.ehmi_replaced,
+            c.phrase_failures,
+            c.inquiries,
+            c.replies,
+            c.confirmations
+        );
+        let log_failures = self.state().log.failures;
+        if log_failures > 0 {
+            let _ = write!(out, " | log write failures {log_failures}");
+        }
+        out
+    }
+}
+
+/// Adds the fields of `extra` (an object) to `base` (an object).
+fn merge(base: &mut serde_json::Value, extra: serde_json::Value) {
+    if let (Some(b), serde_json::Value::Object(e)) = (base.as_object_mut(), extra) {
+        b.extend(e);
+    }
+}
