@@ -5,10 +5,13 @@ use std::process::{Child, Command as Process, ExitCode, Stdio};
 use std::time::Duration;
 
 use clap::{Parser, Subcommand, ValueEnum};
+use concord_core::AdviceVerdict;
 use concord_core::DecisionCore;
 use concord_ipc::core_service::{self, Geometry, RunConfig, StopAfter};
 use concord_ipc::feed::{self, Fault, FeedConfig, Scenario};
-use concord_ipc::wire::{CoreStats, EhmiMessage, WireDecision};
+use concord_ipc::wire::{
+    AdviceFailure, Audience, CoreStats, EhmiMessage, IntentText, TextSource, WireDecision,
+};
 use concord_ipc::{clock, iox, monitor, services};
 
 #[derive(Parser)]
@@ -329,6 +332,9 @@ fn run(
         cfg.service.geometry = g;
     }
     cfg.validate()?;
+    if let Some(note) = cfg.cover_advice_deadline() {
+        eprintln!("concord run: {note}");
+    }
     let iox_config = iox::init(iox_path).map_err(|e| e.to_string())?;
     let mut core = Box::new(
         DecisionCore::new(cfg.core, cfg.service.geometry.morphology())
@@ -361,10 +367,14 @@ struct ChildProcess(Child);
 
 impl ChildProcess {
     fn spawn(args: &[&str], stdout: Stdio) -> Result<Self, String> {
+        Self::spawn_with(args, stdout, Stdio::inherit())
+    }
+    fn spawn_with(args: &[&str], stdout: Stdio, stderr: Stdio) -> Result<Self, String> {
         let exe = std::env::current_exe().map_err(|e| format!("locating concord: {e}"))?;
         Process::new(exe)
             .args(args)
             .stdout(stdout)
+            .stderr(stderr)
             .spawn()
             .map(ChildProcess)
             .map_err(|e| format!("starting concord {}: {e}", args.join(" ")))
@@ -407,7 +417,29 @@ fn demo(speed: f64, duration: f64, iox_path: Option<&Path>) -> Result<(), String
         v
     };
     println!("Concord demo: the paper's unprotected left turn, CAV and HDV at {speed} m/s");
-    println!("LLM sidecar: not part of this build yet (it lands with the sidecar issue); deciding logit-only.");
+    let llm = DemoLlm::find();
+    let mut sidecar = match llm.url() {
+        Some(url) => {
+            let mut args = with_iox(vec![
+                "sidecar".into(),
+                "--prefix".into(),
+                prefix.clone(),
+                "--llm-url".into(),
+                url.to_string(),
+                "--log".into(),
+                DEMO_LOG.into(),
+            ]);
+            if Path::new(SIDECAR_CONFIG).exists() {
+                args.extend(["--config".into(), SIDECAR_CONFIG.into()]);
+            }
+            Some(ChildProcess::spawn_with(
+                &args.iter().map(String::as_str).collect::<Vec<_>>(),
+                Stdio::null(),
+                Stdio::piped(),
+            )?)
+        }
+        None => None,
+    };
     let core_args = with_iox(vec![
         "run".into(),
         "--prefix".into(),
@@ -425,8 +457,28 @@ fn demo(speed: f64, duration: f64, iox_path: Option<&Path>) -> Result<(), String
             .map_err(|e| e.to_string())?;
     let stats = iox::subscriber::<CoreStats>(&node, &services::name(&prefix, services::STATS), 1)
         .map_err(|e| e.to_string())?;
-    let ehmi = iox::subscriber::<EhmiMessage>(&node, &services::name(&prefix, services::EHMI), 8)
+    let ehmi = iox::subscriber::<EhmiMessage>(&node, &services::name(&prefix, services::EHMI), 32)
         .map_err(|e| e.to_string())?;
+    let texts =
+        iox::publisher::<IntentText>(&node, &services::name(&prefix, services::INTENT_TEXT))
+            .map_err(|e| e.to_string())?;
+    // What the passenger and the HDV's driver say, and when (s after the start).
+    let mut script = vec![
+        (
+            1.0,
+            TextSource::Passenger,
+            0,
+            "I am in a bit of a hurry, can we go?",
+        ),
+        (
+            2.5,
+            TextSource::RoadUser,
+            1,
+            "Go ahead, I will wait for you.",
+        ),
+    ]
+    .into_iter()
+    .peekable();
     let feed_args = with_iox(vec![
         "feed".into(),
         "--scenario".into(),
@@ -464,8 +516,22 @@ fn demo(speed: f64, duration: f64, iox_path: Option<&Path>) -> Result<(), String
                 last_print = now;
             }
         }
+        let elapsed = (clock::now_ns() - started) as f64 * 1e-9;
+        while let Some((_, source, id, text)) = script.next_if(|(t, ..)| elapsed >= *t) {
+            let who = match source {
+                TextSource::Passenger => "passenger".to_string(),
+                TextSource::RoadUser => format!("road user {id}"),
+            };
+            println!("{elapsed:6.2} s  {who} says: {text:?}");
+            let _ = iox::send(&texts, &IntentText::new(clock::now_ns(), source, id, text));
+        }
         while let Ok(Some(m)) = ehmi.receive() {
-            println!("         eHMI: {}", m.text().unwrap_or("(invalid UTF-8)"));
+            let to = match (m.audience, m.addressee) {
+                (a, _) if a == Audience::Passenger as u8 => "HMI to the passenger".to_string(),
+                (a, id) if a == Audience::RoadUser as u8 => format!("eHMI to road user {id}"),
+                _ => "eHMI".to_string(),
+            };
+            println!("         {to}: {}", m.text().unwrap_or("(invalid UTF-8)"));
         }
         if let Ok((Some(s), _)) = iox::newest(&stats) {
             last_stats = Some(s);
@@ -483,7 +549,18 @@ fn demo(speed: f64, duration: f64, iox_path: Option<&Path>) -> Result<(), String
     if let Ok((Some(s), _)) = iox::newest(&stats) {
         last_stats = Some(s);
     }
+    let sidecar_final = sidecar.as_mut().map(|sc| {
+        sc.terminate();
+        let mut err = String::new();
+        if let Some(mut e) = sc.0.stderr.take() {
+            let _ = std::io::Read::read_to_string(&mut e, &mut err);
+        }
+        err.lines()
+            .find_map(|l| l.strip_prefix("concord sidecar: final: "))
+            .map(str::to_string)
+    });
     core.terminate();
+    llm.stop();
     println!();
     match (
         feed_status,
@@ -516,18 +593,127 @@ fn demo(speed: f64, duration: f64, iox_path: Option<&Path>) -> Result<(), String
                 us(s.cycle_ns[4]),
                 us(s.scene_age_ns[0])
             );
+            let mut rejected = String::new();
+            for v in AdviceVerdict::ALL.iter().skip(2) {
+                if s.advice_verdicts[*v as usize] > 0 {
+                    rejected += &format!(" {}={}", v.name(), s.advice_verdicts[*v as usize]);
+                }
+            }
+            let mut failed = String::new();
+            for f in AdviceFailure::ALL {
+                if s.advice_failures[f as usize] > 0 {
+                    failed += &format!(" {}={}", f.name(), s.advice_failures[f as usize]);
+                }
+            }
             println!(
-                "advice: {} requests, {} answers (accepted {}, rejected {}); decisions logit {}, advice {}, minimum-risk {}",
+                "advice: {} requests, {} answers in; accepted {}, rejected:{}; sidecar failures:{}",
                 s.advice_requests,
                 s.advice_received,
-                s.advice_verdicts[1],
-                s.advice_verdicts.iter().skip(2).sum::<u64>(),
-                s.decisions[0],
-                s.decisions[1],
-                s.decisions[2]
+                s.advice_verdicts[AdviceVerdict::Accepted as usize],
+                if rejected.is_empty() {
+                    " none"
+                } else {
+                    &rejected
+                },
+                if failed.is_empty() { " none" } else { &failed },
+            );
+            println!(
+                "decisions: logit {}, advice {}, minimum-risk {}",
+                s.decisions[0], s.decisions[1], s.decisions[2]
             );
         }
         None => println!("core: no statistics received"),
     }
+    match (llm.url(), sidecar_final) {
+        (Some(_), Some(Some(line))) => {
+            println!("sidecar: {line}");
+            println!("interaction log: {DEMO_LOG}");
+        }
+        (Some(_), _) => println!("sidecar: no final statistics (it did not exit cleanly)"),
+        (None, _) => {}
+    }
     Ok(())
+}
+
+/// The sidecar's configuration used by the demo when present.
+const SIDECAR_CONFIG: &str = "deploy/sidecar.toml";
+/// The demo's interaction log.
+const DEMO_LOG: &str = "concord-demo-interactions.jsonl";
+/// The local LLM server's script.
+const LLM_SCRIPT: &str = "deploy/llm/llm.sh";
+
+/// The LLM the demo's sidecar uses.
+enum DemoLlm {
+    /// A server already answers at the configured URL.
+    Running(String),
+    /// The demo started the local server and stops it at the end.
+    Started(String),
+    /// No LLM: the demo runs logit-only.
+    Missing,
+}
+
+impl DemoLlm {
+    /// Uses the configured server if it answers, else starts the local one if it is set up;
+    /// says which, or why the demo runs without one.
+    fn find() -> DemoLlm {
+        let cfg = if Path::new(SIDECAR_CONFIG).exists() {
+            concord_sidecar::SidecarConfig::load(Path::new(SIDECAR_CONFIG)).unwrap_or_default()
+        } else {
+            concord_sidecar::SidecarConfig::default()
+        };
+        let url = cfg.llm.base_url.clone();
+        let probe = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .map_err(|e| e.to_string())
+            .and_then(|rt| rt.block_on(concord_sidecar::probe(&cfg.llm)));
+        if let Ok(model) = probe {
+            println!("LLM sidecar: using {model:?} at {url}");
+            return DemoLlm::Running(url);
+        }
+        let local = url.starts_with("http://127.0.0.1:8181/");
+        if !(local && Path::new(LLM_SCRIPT).exists()) {
+            println!(
+                "LLM sidecar: no LLM server answers at {url}; deciding logit-only (start one, or run `{LLM_SCRIPT} setup` from the repository root for the local default)."
+            );
+            return DemoLlm::Missing;
+        }
+        println!("LLM sidecar: starting the local LLM server ({LLM_SCRIPT} start)");
+        match Process::new(LLM_SCRIPT)
+            .arg("start")
+            .stderr(Stdio::piped())
+            .output()
+        {
+            Ok(out) if out.status.success() => {
+                println!("LLM sidecar: local SmolLM2-135M at {url}");
+                DemoLlm::Started(url)
+            }
+            Ok(out) => {
+                let why = String::from_utf8_lossy(&out.stderr);
+                println!(
+                    "LLM sidecar: the local LLM is not set up ({}); deciding logit-only. Set it up with `{LLM_SCRIPT} setup`.",
+                    why.lines().next().unwrap_or("no reason given").trim()
+                );
+                DemoLlm::Missing
+            }
+            Err(e) => {
+                println!("LLM sidecar: cannot run {LLM_SCRIPT} ({e}); deciding logit-only.");
+                DemoLlm::Missing
+            }
+        }
+    }
+
+    fn url(&self) -> Option<&str> {
+        match self {
+            DemoLlm::Running(u) | DemoLlm::Started(u) => Some(u),
+            DemoLlm::Missing => None,
+        }
+    }
+
+    /// Stops the server if the demo started it.
+    fn stop(&self) {
+        if let DemoLlm::Started(_) = self {
+            let _ = Process::new(LLM_SCRIPT).arg("stop").output();
+        }
+    }
 }

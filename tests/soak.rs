@@ -1,69 +1,31 @@
 //! Hardware-in-the-loop soak across real processes over real iceoryx2: `concord run` at
 //! 100 Hz, and three `concord feed` runs of dense traffic at 20 Hz one after the other: the
 //! first and last inject every fault in turn, the middle one is killed with SIGKILL (a crashed
-//! publisher). This process watches every decision and the core's statistics.
+//! publisher). `concord sidecar` answers advice requests from a loopback LLM server that cycles
+//! through good answers, late answers, garbage, unknown enums, HTTP 500 and dropped
+//! connections; it is killed with SIGKILL during the middle feed and started again. This
+//! process watches every decision and the core's statistics.
 //!
 //! Runs 60 s by default; `CONCORD_SOAK_SECS=3600 cargo test --release --test soak` soaks for
 //! an hour.
 
 use std::collections::HashSet;
-use std::io::Read;
-use std::process::{Child, Command, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use concord_core::FallbackReason;
+use concord_core::{DecisionSource, FallbackReason};
 use concord_ipc::clock::now_ns;
 use concord_ipc::feed::Fault;
-use concord_ipc::wire::{CoreStats, FrameReject, WireDecision};
+use concord_ipc::wire::{AdviceFailure, CoreStats, FrameReject, WireDecision};
 use concord_ipc::{iox, services};
 
-const CONCORD: &str = env!("CARGO_BIN_EXE_concord");
+#[path = "support/fault_llm.rs"]
+mod fault_llm;
+#[path = "support/proc.rs"]
+mod proc;
 
-struct Proc(Child);
-
-impl Proc {
-    fn start(args: &[String], stdout: Stdio) -> Proc {
-        Proc(
-            Command::new(CONCORD)
-                .args(args)
-                .stdout(stdout)
-                .spawn()
-                .expect("concord starts"),
-        )
-    }
-    fn signal(&self, sig: i32) {
-        // SAFETY: kill with the child's pid.
-        unsafe { libc::kill(self.0.id() as i32, sig) };
-    }
-    fn alive(&mut self) -> bool {
-        matches!(self.0.try_wait(), Ok(None))
-    }
-    /// Waits for the exit; returns success and the captured stdout.
-    fn finish(mut self, within: Duration) -> (bool, String) {
-        let deadline = Instant::now() + within;
-        while self.alive() && Instant::now() < deadline {
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        if self.alive() {
-            let _ = self.0.kill();
-        }
-        let status = self.0.wait().expect("child status");
-        let mut out = String::new();
-        if let Some(mut s) = self.0.stdout.take() {
-            let _ = s.read_to_string(&mut out);
-        }
-        (status.success(), out)
-    }
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        if self.alive() {
-            let _ = self.0.kill();
-            let _ = self.0.wait();
-        }
-    }
-}
+use fault_llm::{FaultLlm, Mode};
+use proc::Proc;
 
 /// A feed's summary line, as numbers by key.
 fn summary(out: &str) -> std::collections::HashMap<String, u64> {
@@ -122,6 +84,40 @@ fn soak_feed_core_with_faults_and_a_crashed_publisher() {
         last_stats = iox::newest(&stats).unwrap().0;
     }
 
+    let llm = FaultLlm::start(Mode::yielding());
+    let log = std::env::temp_dir().join(format!("concord-soak-{}.jsonl", std::process::id()));
+    let sidecar = || {
+        Proc::start(
+            &[
+                "sidecar",
+                "--prefix",
+                &prefix,
+                "--llm-url",
+                &llm.url(),
+                "--log",
+                &log.display().to_string(),
+            ]
+            .map(String::from),
+            Stdio::null(),
+        )
+    };
+    let mut sidecar_a = sidecar();
+    // The LLM server's behaviour, switched every 2.5 s.
+    let modes = [
+        Mode::yielding(),
+        Mode::Late(Duration::from_secs(4)),
+        Mode::Malformed,
+        Mode::yielding(),
+        Mode::UnknownEnum,
+        Mode::ServerError,
+        Mode::Close,
+    ];
+    let soak_started = Instant::now();
+    let set_mode = || {
+        let i = (soak_started.elapsed().as_secs_f64() / 2.5) as usize % modes.len();
+        llm.set(modes[i].clone());
+    };
+
     let faults = Fault::ALL.map(|f| f.name()).join(",");
     let feed = |secs: f64, with_faults: bool| -> Proc {
         let mut args = vec![
@@ -158,6 +154,7 @@ fn soak_feed_core_with_faults_and_a_crashed_publisher() {
     let mut observe = |until: Instant, core: &mut Proc, seen: &mut HashSet<(u64, u64)>| {
         while Instant::now() < until {
             std::thread::sleep(Duration::from_millis(10));
+            set_mode();
             assert!(core.alive(), "the core died");
             while let Some(d) = decisions.receive().unwrap() {
                 if d.fallback == FallbackReason::StaleScene as u8 {
@@ -198,6 +195,11 @@ fn soak_feed_core_with_faults_and_a_crashed_publisher() {
     );
     b.signal(libc::SIGKILL);
     let _ = b.finish(Duration::from_secs(5));
+    assert!(sidecar_a.alive(), "the sidecar died");
+    sidecar_a.signal(libc::SIGKILL);
+    let _ = sidecar_a.finish(Duration::from_secs(5));
+    let before_restart = iox::newest(&stats).unwrap().0.or(last_stats);
+    let mut sidecar_b = sidecar();
     observe(
         Instant::now() + Duration::from_secs(1),
         &mut core,
@@ -231,8 +233,13 @@ fn soak_feed_core_with_faults_and_a_crashed_publisher() {
         .0
         .or(last_stats)
         .expect("statistics");
+    assert!(sidecar_b.alive(), "the restarted sidecar died");
+    sidecar_b.signal(libc::SIGTERM);
+    let (sidecar_ok, _) = sidecar_b.finish(Duration::from_secs(10));
+    assert!(sidecar_ok, "the sidecar did not exit cleanly on SIGTERM");
     let (core_ok, _) = core.finish(Duration::from_secs(15));
     assert!(core_ok, "the core did not exit cleanly");
+    let _ = std::fs::remove_file(&log);
 
     let (sa, sc) = (summary(&a_out), summary(&c_out));
     eprintln!("A: {sa:?}\nC: {sc:?}\nanswered {answered} (per feed {per_feed:?}), stale {stale}\n{last_stats:?}");
@@ -289,5 +296,26 @@ fn soak_feed_core_with_faults_and_a_crashed_publisher() {
     assert_eq!(
         s.advice_requests, s.frames_accepted,
         "one advice request per decision by default"
+    );
+    // The sidecar's answers and failures reached the core, before and after its restart, and
+    // each fault of the LLM server shows as its own reason.
+    let before = before_restart.expect("statistics before the sidecar restart");
+    assert!(
+        s.advice_received > before.advice_received,
+        "no advice after the restart"
+    );
+    for f in AdviceFailure::ALL {
+        assert!(
+            s.advice_failures[f as usize] > 0,
+            "no {} failure counted",
+            f.name()
+        );
+    }
+    let valid_verdicts: u64 = s.advice_verdicts.iter().skip(1).sum();
+    assert!(valid_verdicts > 0, "no answer was weighed by the gate");
+    assert!(s.advice_received >= s.advice_verdicts.iter().sum::<u64>());
+    assert!(
+        s.decisions[DecisionSource::Advice as usize] > 0,
+        "confident safe advice was never applied"
     );
 }

@@ -124,7 +124,40 @@ impl RunConfig {
         {
             return Err("service.stats_period_s must be > 0 and print_period_s >= 0".into());
         }
-        self.core.validate().map_err(|e| format!("core: {e}"))
+        self.core.validate().map_err(|e| format!("core: {e}"))?;
+        let needed = self.freshness_needed();
+        if needed > concord_core::advice::MAX_PENDING as u32 {
+            return Err(format!(
+                "core.advice.deadline_s = {} s at {} Hz spans {needed} cycles, more than the {} \
+                 requests the core remembers",
+                self.core.advice.deadline_s,
+                s.rate_hz,
+                concord_core::advice::MAX_PENDING
+            ));
+        }
+        Ok(())
+    }
+
+    /// Cycles the advice deadline spans at the loop rate: `core.advice.freshness_cycles` must
+    /// be at least this, or in-time answers would count as unknown requests.
+    fn freshness_needed(&self) -> u32 {
+        (self.core.advice.deadline_s * self.service.rate_hz).ceil() as u32
+    }
+
+    /// Raises `core.advice.freshness_cycles` to cover the advice deadline at the loop rate (a
+    /// faster `--rate` than the file's shortens the window); says so when it does.
+    pub fn cover_advice_deadline(&mut self) -> Option<String> {
+        let needed = self.freshness_needed();
+        let f = &mut self.core.advice.freshness_cycles;
+        (*f < needed).then(|| {
+            let note = format!(
+                "core.advice.freshness_cycles raised from {f} to {needed} to cover \
+                 advice.deadline_s = {} s at {} Hz",
+                self.core.advice.deadline_s, self.service.rate_hz
+            );
+            *f = needed;
+            note
+        })
     }
 }
 

@@ -44,7 +44,7 @@ pub struct LlmConfig {
     pub connect_timeout_s: f64,
     /// Longest time one HTTP attempt may take, s (the request's deadline cuts it shorter).
     pub request_timeout_s: f64,
-    /// Requests in flight at once, over advice and intents.
+    /// Requests in flight at once, over advice, intents and eHMI phrasing.
     pub max_in_flight: usize,
     /// An attempt is not started with less than this left before the deadline, s.
     pub min_attempt_s: f64,
@@ -67,7 +67,7 @@ impl Default for LlmConfig {
             api_key_env: String::new(),
             connect_timeout_s: 0.5,
             request_timeout_s: 10.0,
-            max_in_flight: 2,
+            max_in_flight: 1,
             min_attempt_s: 0.2,
             retry_backoff_s: 0.05,
             logprobs: true,
@@ -85,6 +85,8 @@ pub struct AdviceConfig {
     pub prompt_format: PromptFormat,
     /// Scene history in the Raw rendering, s.
     pub raw_history_s: f64,
+    /// Objects described in the OPM rendering, the most salient first (eq. 7).
+    pub max_objects: usize,
     /// Reasoning steps asked for (0: none; each costs generation time).
     pub reasoning_steps: usize,
     /// Most tokens generated per answer.
@@ -96,6 +98,7 @@ impl Default for AdviceConfig {
         AdviceConfig {
             prompt_format: PromptFormat::Opm,
             raw_history_s: 0.4,
+            max_objects: 3,
             reasoning_steps: 0,
             max_tokens: 64,
         }
@@ -250,6 +253,13 @@ impl SidecarConfig {
             && (0.0..=5.0).contains(&self.advice.raw_history_s))
         {
             return Err("advice.raw_history_s must be in [0, 5]".into());
+        }
+        if self.advice.max_objects == 0 || self.advice.max_objects > concord_ipc::wire::WIRE_OBJECTS
+        {
+            return Err(format!(
+                "advice.max_objects must be in 1..={}",
+                concord_ipc::wire::WIRE_OBJECTS
+            ));
         }
         if self.advice.reasoning_steps > 8 || self.advice.max_tokens < 16 {
             return Err("advice.reasoning_steps must be <= 8 and advice.max_tokens >= 16".into());

@@ -170,9 +170,8 @@ pub fn confirmation(action: Option<IntentAction>) -> &'static str {
         Some(IntentAction::Yield | IntentAction::Decelerate | IntentAction::Stop) => {
             "Do you want me to slow down and let others go first?"
         }
-        Some(IntentAction::TurnLeft | IntentAction::TurnRight) => {
-            "Do you want me to change the route?"
-        }
+        Some(IntentAction::TurnLeft) => "Do you want me to turn left now?",
+        Some(IntentAction::TurnRight) => "Do you want me to turn right now?",
         None => "Sorry, should I hurry or take it easy?",
     }
 }

@@ -171,7 +171,7 @@ impl LlmClient {
         let status = resp.status();
         let bytes = resp.bytes().await.map_err(classify)?;
         if !status.is_success() {
-            let text = String::from_utf8_lossy(&bytes[..bytes.len().min(200)]).into_owned();
+            let text = String::from_utf8_lossy(&bytes[..bytes.len().min(400)]).into_owned();
             return Err(LlmError::HttpStatus(status.as_u16(), text));
         }
         Answer::parse(&bytes).map_err(LlmError::Reply)

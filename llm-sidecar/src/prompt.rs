@@ -124,7 +124,7 @@ the best maneuver now, weighing safety first, then the intents and efficiency. A
     if steps > 0 {
         let _ = write!(s, ", then \"steps\", at most {steps} short reasoning steps");
     }
-    s.push('.');
+    s.push_str(". Write only the JSON object, on one line, without a code fence.");
     s
 }
 
@@ -172,83 +172,108 @@ pub fn describe_intent(i: &WireIntent) -> Option<String> {
     (!parts.is_empty()).then(|| parts.join(", "))
 }
 
-fn stop_line(d: f64) -> String {
-    if !d.is_finite() || d > 1e6 {
-        "no stop line ahead".into()
-    } else if d >= 0.0 {
-        format!("{d:.1} m before the stop line")
-    } else {
-        format!("{:.1} m past the stop line", -d)
-    }
-}
-
 fn probabilities(p: &[f64; 5]) -> String {
     Maneuver::ALL
         .iter()
         .zip(p)
-        .map(|(m, p)| format!("{} {p:.2}", m.name()))
+        .map(|(m, p)| format!("{} {:.0}%", m.name(), p * 100.0))
         .collect::<Vec<_>>()
         .join(", ")
 }
 
-/// The scene of `r` as objects, processes and relations (eq. 6).
-fn opm_scene(r: &AdviceRequest, out: &mut String) {
+/// "braking 0.5" / "accelerating 0.5" / "steady", with the angle to the lane when the
+/// acceleration turns the car (15° to 165°).
+fn motion(accel: f64, theta_a: f64) -> String {
+    let along = if accel <= -0.2 {
+        format!("braking {:.1}", -accel)
+    } else if accel >= 0.2 {
+        format!("accelerating {accel:.1}")
+    } else {
+        "steady".to_string()
+    };
+    let deg = theta_a.to_degrees().abs();
+    if (15.0..=165.0).contains(&deg) {
+        format!("{along}, turning ({deg:.0} deg to its lane)")
+    } else {
+        along
+    }
+}
+
+fn short_stop_line(d: f64) -> String {
+    if !d.is_finite() || d > 1e6 {
+        "off the lanes".into()
+    } else if d >= 0.0 {
+        format!("{d:.0} m to stop line")
+    } else {
+        format!("{:.0} m past stop line", -d)
+    }
+}
+
+/// The scene of `r` as objects, processes and relations (eq. 6): the `max_objects` most
+/// salient objects (eq. 7), each with its process and its relations to the ego.
+fn opm_scene(r: &AdviceRequest, max_objects: usize, out: &mut String) {
     let e = &r.ego;
     let _ = writeln!(
         out,
-        "Ego: route {}; {}; {:.1} m/s; acceleration {:+.1} m/s2.",
+        "Ego: route {}, {}, {:.1} m/s, {}.",
         route(r.route_turn),
-        stop_line(e.dist_to_stop_m),
+        short_stop_line(e.dist_to_stop_m),
         e.speed_mps,
-        e.accel_mps2
+        motion(e.accel_mps2, e.theta_a)
     );
     if r.leader_gap_m < 1e6 {
         let _ = writeln!(
             out,
-            "Leader: {:.1} m ahead at {:.1} m/s.",
+            "Leader {:.0} m ahead at {:.1} m/s.",
             r.leader_gap_m, r.leader_speed_mps
         );
     }
     let n = (r.n_objects as usize).min(r.objects.len());
-    if n == 0 {
-        out.push_str("No other road user is relevant.\n");
-    }
-    for o in &r.objects[..n] {
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| r.objects[b].saliency.total_cmp(&r.objects[a].saliency));
+    for &i in order.iter().take(max_objects) {
+        let o = &r.objects[i];
         let a = &o.state;
         let p = &o.process;
         let _ = write!(
             out,
-            "Object {} ({}, importance {:.2}): {}; {:.1} m/s; acceleration {:+.1} m/s2 at {:.0} deg \
-to its lane{}.",
+            "V{} {}, importance {:.0}%: {}, {:.1} m/s, {}{}.",
             a.id,
             kind(a.kind),
-            o.saliency,
-            stop_line(p.dist_to_stop_m),
+            o.saliency * 100.0,
+            short_stop_line(p.dist_to_stop_m),
             p.speed_mps,
-            p.accel_mps2,
-            p.theta_a.to_degrees().abs(),
+            motion(p.accel_mps2, p.theta_a),
             signal(a.turn_signal)
         );
-        if let Some(c) = r
-            .conflicts
-            .get(o.conflict as usize)
-            .filter(|_| o.conflict != UNKNOWN && o.conflict < r.n_conflicts)
-        {
+        if o.conflict != UNKNOWN && o.conflict < r.n_conflicts {
+            let c = &r.conflicts[o.conflict as usize];
             let _ = write!(
                 out,
-                " Conflict with ego: ego arrives in {:.1} s, it in {:.1} s, |dTTC| {:.1} s{}.",
-                c.ego_ttc_s,
+                " Conflict: V{} in {:.1} s, ego in {:.1} s, dTTC {:.1} s{}.",
+                a.id,
                 c.agent_ttc_s,
+                c.ego_ttc_s,
                 c.delta_ttc_s,
-                if c.risky != 0 { " (risky)" } else { "" }
+                if c.risky != 0 { ", risky" } else { "" }
             );
         } else if o.longitudinal_m < 1e6 {
-            let _ = write!(out, " Same path, {:.1} m away.", o.longitudinal_m);
+            let _ = write!(out, " Same path, {:.0} m away.", o.longitudinal_m);
         }
         if let Some(i) = describe_intent(&a.intent) {
             let _ = write!(out, " Intent: {i}.");
         }
         out.push('\n');
+    }
+    if n > max_objects {
+        let _ = writeln!(
+            out,
+            "{} less important road users left out.",
+            n - max_objects
+        );
+    }
+    if n == 0 {
+        out.push_str("No other road user is relevant.\n");
     }
 }
 
@@ -305,11 +330,15 @@ fn raw_scene(r: &AdviceRequest, history: &[SceneFrame], step_s: f64, out: &mut S
         let age = (last.stamp_ns.saturating_sub(f.stamp_ns)) as f64 * 1e-9;
         let _ = write!(out, "t=-{age:.2}");
         let agent = |out: &mut String, tag: String, a: &WireAgent| {
-            let _ = write!(
-                out,
-                " {tag} {:.2} {:.2} {:.2} {:.2} {:.2} {:.2} {:.3}",
-                a.x, a.y, a.vx, a.vy, a.ax, a.ay, a.heading
-            );
+            let _ = write!(out, " {tag}");
+            for v in [a.x, a.y, a.vx, a.vy, a.ax, a.ay, a.heading] {
+                // "-0.00" and "0.00" as "0".
+                if v.abs() < 0.005 {
+                    out.push_str(" 0");
+                } else {
+                    let _ = write!(out, " {v:.2}");
+                }
+            }
         };
         agent(out, "e".into(), &f.ego);
         for a in f.agents.iter().filter(|a| a.valid != 0) {
@@ -322,11 +351,8 @@ fn raw_scene(r: &AdviceRequest, history: &[SceneFrame], step_s: f64, out: &mut S
 /// Words of the passenger and the other road users, quoted.
 fn words(r: &AdviceRequest, said: &[Utterance], max_chars: usize, out: &mut String) {
     let passenger: Vec<_> = said.iter().filter(|u| u.from.is_none()).collect();
-    match passenger.last() {
-        Some(u) => {
-            let _ = writeln!(out, "Passenger said: {}", quote(&u.text, max_chars));
-        }
-        None => out.push_str("Passenger said nothing.\n"),
+    if let Some(u) = passenger.last() {
+        let _ = writeln!(out, "Passenger said: {}", quote(&u.text, max_chars));
     }
     if let Some(i) = describe_intent(&r.ego_intent) {
         let _ = writeln!(out, "Passenger intent: {i}.");
@@ -341,11 +367,13 @@ fn words(r: &AdviceRequest, said: &[Utterance], max_chars: usize, out: &mut Stri
     }
 }
 
-/// The advice prompt for request `r`: the static prefix, then the scene in `format`, P_n and
-/// what people said. `history` (oldest first) is used by the Raw rendering only.
+/// The advice prompt for request `r`: the static prefix, then the scene in `format` (OPM
+/// with its `max_objects` most salient objects), P_n and what people said. `history` (oldest
+/// first) is used by the Raw rendering only.
 pub fn advice_messages(
     format: PromptFormat,
     steps: usize,
+    max_objects: usize,
     r: &AdviceRequest,
     history: &[SceneFrame],
     said: &[Utterance],
@@ -353,15 +381,11 @@ pub fn advice_messages(
 ) -> Vec<ChatMessage> {
     let mut user = String::with_capacity(1024);
     match format {
-        PromptFormat::Opm => opm_scene(r, &mut user),
+        PromptFormat::Opm => opm_scene(r, max_objects, &mut user),
         PromptFormat::Simple => simple_scene(r, &mut user),
         PromptFormat::Raw => raw_scene(r, history, 0.1, &mut user),
     }
-    let _ = writeln!(
-        user,
-        "Logit P_n (corrected): {}.",
-        probabilities(&r.p_corrected)
-    );
+    let _ = writeln!(user, "P_n: {}.", probabilities(&r.p_corrected));
     words(r, said, max_chars, &mut user);
     vec![
         ChatMessage::system(advice_prefix(format, steps)),
@@ -373,7 +397,7 @@ pub fn advice_messages(
 pub const PHRASE_PREFIX: &str = "You write the text shown on the external display of an \
 automated car to the people around it. In at most 64 characters, say what the car is doing and \
 what the others may do, in the tone asked for. Never promise anything the car is not doing. \
-Answer in JSON: \"text\".";
+Answer in JSON: \"text\". Write only the JSON object, on one line, without a code fence.";
 
 /// The eHMI phrasing prompt for an executed decision.
 pub fn phrase_messages(doing: &str, tone: &str) -> Vec<ChatMessage> {
@@ -390,7 +414,8 @@ pub fn intent_prefix() -> String {
 For the newest message give: \"style\" (aggressive, balanced or conservative driving), \
 \"action\" (what they will do: yield, proceed, accelerate, decelerate, turn_left, turn_right, \
 stop), \"task\" (commute, emergency, official, leisure), each \"unknown\" when the words do not \
-say, and \"reply\", a short polite answer of at most 64 characters from the car."
+say, and \"reply\", a short polite answer of at most 64 characters from the car. Write only \
+the JSON object, on one line, without a code fence."
     )
 }
 

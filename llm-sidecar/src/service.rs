@@ -37,8 +37,9 @@ use crate::bus::{History, Outbound};
 use crate::config::SidecarConfig;
 use crate::ehmi::{self, Dialogue, Stance};
 use crate::interaction_log::InteractionLog;
-use crate::llm::{LlmClient, LlmError};
+use crate::llm::{LlmClient, LlmError, Reply};
 use crate::prompt::{self, Utterance};
+use crate::reply::{Answer, ReplyError};
 use crate::schema::{self, AdviceAnswer, IntentAnswer};
 
 /// Utterances kept for the advice prompt.
@@ -269,6 +270,7 @@ impl Sidecar {
             prompt::advice_messages(
                 format,
                 self.cfg.advice.reasoning_steps,
+                self.cfg.advice.max_objects,
                 &req,
                 &history,
                 &said,
@@ -281,15 +283,7 @@ impl Sidecar {
             &schema::advice_schema(self.cfg.advice.reasoning_steps),
             self.cfg.advice.max_tokens,
         );
-        let result = match self.slot(deadline).await {
-            Some(_permit) => self.client.call(&body, deadline).await,
-            None => Err(LlmError::Timeout),
-        };
-        let decoded = result.and_then(|r| {
-            AdviceAnswer::decode(&r.answer)
-                .map(|a| (a, r))
-                .map_err(LlmError::Reply)
-        });
+        let decoded = self.ask(&body, deadline, AdviceAnswer::decode).await;
         let mut s = self.state();
         let (ego_intent, agent_intents, n_agent_intents) = self.intents(&s);
         let mut advice = WireAdvice {
@@ -337,6 +331,22 @@ impl Sidecar {
         s.log.write(&line);
         drop(s);
         self.publish(Outbound::Advice(advice));
+    }
+
+    /// Sends `body` when a request slot frees up and decodes the answer, all before
+    /// `deadline`.
+    async fn ask<T>(
+        &self,
+        body: &serde_json::Value,
+        deadline: Instant,
+        decode: impl FnOnce(&Answer) -> Result<T, ReplyError>,
+    ) -> Result<(T, Reply), LlmError> {
+        let Some(_permit) = self.slot(deadline).await else {
+            return Err(LlmError::Timeout);
+        };
+        let reply = self.client.call(body, deadline).await?;
+        let value = decode(&reply.answer).map_err(LlmError::Reply)?;
+        Ok((value, reply))
     }
 
     /// A request slot, or `None` if none frees up before `deadline`.
@@ -396,15 +406,10 @@ impl Sidecar {
         let body = self
             .client
             .body(&messages, "intent", &schema::intent_schema(), 96);
-        let result = match self.slot(deadline).await {
-            Some(_permit) => self.client.call(&body, deadline).await,
-            None => Err(LlmError::Timeout),
-        };
-        let decoded = result.and_then(|r| {
-            IntentAnswer::decode(&r.answer, self.cfg.llm.confidence_without_logprobs)
-                .map(|a| (a, r))
-                .map_err(LlmError::Reply)
-        });
+        let default = self.cfg.llm.confidence_without_logprobs;
+        let decoded = self
+            .ask(&body, deadline, |a| IntentAnswer::decode(a, default))
+            .await;
         let mut s = self.state();
         let mut line = json!({"kind": "intent", "source": speaker, "messages": messages});
         match decoded {
@@ -521,6 +526,10 @@ impl Sidecar {
         // The decision announced last (maneuver, stopping), when, and the model's text for it.
         let mut last: Option<(Maneuver, bool, Instant)> = None;
         let mut phrased: Option<String> = None;
+        // Phrasings by (maneuver, stopping, tone): each is asked for once; accepted ones kept.
+        let mut known: BTreeMap<(u8, bool, &'static str), String> = BTreeMap::new();
+        let mut tried = std::collections::BTreeSet::new();
+        let mut asked: Option<(u8, bool, &'static str)> = None;
         let mut phrasing: Option<Phrasing<'_>> = None;
         loop {
             let pending = async {
@@ -539,24 +548,26 @@ impl Sidecar {
                     let now = Instant::now();
                     let changed = last.is_none_or(|(m, st, _)| m != maneuver || st != stopping);
                     let due = changed || last.is_some_and(|(_, _, t)| now.duration_since(t) >= repeat);
-                    if changed {
-                        phrased = None;
-                        phrasing = None;
-                    }
                     let style = {
                         let mut s = self.state();
                         s.decision = Some(d);
                         self.note_verdict(&mut s, &d);
                         self.addressed_style(&s)
                     };
+                    let key = (maneuver as u8, stopping, ehmi::tone(style));
+                    if changed {
+                        phrased = known.get(&key).cloned();
+                        phrasing = None;
+                    }
                     if due {
                         last = Some((maneuver, stopping, now));
                         let (text, _) = ehmi::compose(phrased.as_deref(), stance, stopping, style);
                         self.announce(&text);
                     }
-                    if changed && self.cfg.ehmi.llm_phrasing {
+                    if changed && self.cfg.ehmi.llm_phrasing && !stopping && tried.insert(key) {
                         let doing = ehmi::describe(maneuver, stopping);
-                        phrasing = Some(Box::pin(self.phrase(doing, ehmi::tone(style))));
+                        asked = Some(key);
+                        phrasing = Some(Box::pin(self.phrase(doing, key.2)));
                     }
                     self.inquire(now);
                 }
@@ -570,6 +581,9 @@ impl Sidecar {
                             Ok(()) if !stopping => {
                                 s.counters.ehmi_phrased += 1;
                                 phrased = Some(text.trim().to_string());
+                                if let Some(k) = asked.take() {
+                                    known.insert(k, text.trim().to_string());
+                                }
                                 drop(s);
                                 self.announce(&text);
                             }
@@ -627,16 +641,11 @@ impl Sidecar {
         let body = self
             .client
             .body(&messages, "ehmi", &schema::phrase_schema(), 48);
-        let result = match self.slot(deadline).await {
-            Some(_permit) => self.client.call(&body, deadline).await,
-            None => Err(LlmError::Timeout),
-        };
-        let decoded = result.and_then(|r| {
-            r.answer
-                .decode::<schema::Phrase>()
-                .map(|p| (p.text, r))
-                .map_err(LlmError::Reply)
-        });
+        let decoded = self
+            .ask(&body, deadline, |a| {
+                a.decode::<schema::Phrase>().map(|p| p.text)
+            })
+            .await;
         let mut line = json!({"kind": "ehmi", "messages": messages});
         let out = match decoded {
             Ok((text, r)) => {

@@ -3,6 +3,7 @@
 //! listens on 127.0.0.1 on a free port, answers `GET /v1/models`, and answers
 //! `POST /v1/chat/completions` according to its current [`Mode`], which a test may change at
 //! any time. Dropping it stops it.
+#![allow(dead_code)]
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{Shutdown, TcpListener, TcpStream};
@@ -12,7 +13,6 @@ use std::time::Duration;
 
 /// How the server answers completions.
 #[derive(Debug, Clone, PartialEq)]
-#[allow(dead_code)]
 pub enum Mode {
     /// A well-formed answer: advice `maneuver` with probability `p` (from its
     /// log-probability); `ehmi` as the phrasing of a decision and the reply to a message; for
@@ -38,7 +38,6 @@ pub enum Mode {
 
 impl Mode {
     /// Confident advice to decelerate.
-    #[allow(dead_code)]
     pub fn yielding() -> Mode {
         Mode::Answer {
             maneuver: "decelerate",
@@ -59,7 +58,6 @@ pub struct FaultLlm {
     pub requests: Arc<AtomicU64>,
 }
 
-#[allow(dead_code)]
 impl FaultLlm {
     pub fn start(mode: Mode) -> FaultLlm {
         let listener = TcpListener::bind("127.0.0.1:0").expect("bind 127.0.0.1:0");
