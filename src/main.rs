@@ -45,6 +45,8 @@ enum GeometryArg {
     Merge,
     /// highway-env's intersection-v0, in its coordinates (bridges/python/highway_bridge.py).
     HighwayEnvIntersection,
+    /// highway-env's merge-v0, in its coordinates (bridges/python/highway_bridge.py).
+    HighwayEnvMerge,
 }
 
 impl GeometryArg {
@@ -53,8 +55,40 @@ impl GeometryArg {
             GeometryArg::PaperIntersection => Geometry::PaperIntersection,
             GeometryArg::Merge => Geometry::Merge,
             GeometryArg::HighwayEnvIntersection => Geometry::HighwayEnvIntersection,
+            GeometryArg::HighwayEnvMerge => Geometry::HighwayEnvMerge,
         }
     }
+}
+
+/// The experiments of `concord experiment`.
+#[derive(Subcommand)]
+enum ExperimentArg {
+    /// Fig. 4 and Fig. 7b: the left turn and the merge at 6, 8 and 10 m/s, `--reps` times, for
+    /// every controller; CSVs, SVG figures and a summary table.
+    Paper {
+        #[arg(long, default_value_t = 30)]
+        reps: u32,
+        /// Output directory.
+        #[arg(long, default_value = "results/paper")]
+        out: PathBuf,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Worker threads [default: every core].
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+    /// Random left turns over driver styles (aggressive, balanced, conservative), initial
+    /// speeds (5–11 m/s) and HDV starts (±15 m), `--episodes` per controller.
+    Sweep {
+        #[arg(long, default_value_t = 1000)]
+        episodes: u32,
+        #[arg(long, default_value = "results/sweep")]
+        out: PathBuf,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[arg(long)]
+        threads: Option<usize>,
+    },
 }
 
 /// Prompt renderings of `concord sidecar --format`.
@@ -162,8 +196,11 @@ enum Command {
         #[arg(long)]
         log: Option<PathBuf>,
     },
-    /// Rerun the paper's experiments (not yet available).
-    Experiment,
+    /// Rerun the paper's closed-loop experiments against IDM and game-theoretic baselines.
+    Experiment {
+        #[command(subcommand)]
+        which: ExperimentArg,
+    },
 }
 
 fn main() -> ExitCode {
@@ -281,9 +318,30 @@ fn main() -> ExitCode {
             let iox_config = iox::init(iox_path.as_deref()).map_err(|e| e.to_string())?;
             concord_sidecar::run(cfg, &iox_config)
         })(),
-        Command::Experiment => {
-            Err("not yet available: it lands with the closed-loop evaluation issue".into())
-        }
+        Command::Experiment { which } => match which {
+            ExperimentArg::Paper {
+                reps,
+                out,
+                seed,
+                threads,
+            } => experiment(
+                "paper",
+                concord_sim::experiment::paper_grid(reps, seed),
+                &out,
+                threads,
+            ),
+            ExperimentArg::Sweep {
+                episodes,
+                out,
+                seed,
+                threads,
+            } => experiment(
+                "sweep",
+                concord_sim::experiment::sweep_grid(episodes, seed),
+                &out,
+                threads,
+            ),
+        },
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -716,4 +774,136 @@ impl DemoLlm {
             let _ = Process::new(LLM_SCRIPT).arg("stop").output();
         }
     }
+}
+
+/// Runs `grid` in parallel with a progress line, writes the CSVs and figures under `out`, and
+/// prints the summary table.
+fn experiment(
+    name: &str,
+    grid: Vec<concord_sim::experiment::Episode>,
+    out: &Path,
+    threads: Option<usize>,
+) -> Result<(), String> {
+    use concord_sim::experiment::{self as exp, ControllerKind};
+    use concord_sim::world::ScenarioKind;
+    use std::io::Write as _;
+    let threads = threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .max(1);
+    let params = concord_core::Params::default();
+    eprintln!(
+        "concord experiment {name}: {} episodes on {threads} thread(s), output in {}",
+        grid.len(),
+        out.display()
+    );
+    let started = std::time::Instant::now();
+    let outcomes = exp::run_all(&grid, &params, threads, |done, total| {
+        if done % 10 == 0 || done == total {
+            let width = 40;
+            let filled = done * width / total.max(1);
+            let elapsed = started.elapsed().as_secs_f64();
+            let eta = elapsed / done.max(1) as f64 * (total - done) as f64;
+            eprint!(
+                "\r[{}{}] {done}/{total} episodes, {elapsed:.0} s, about {eta:.0} s left ",
+                "=".repeat(filled),
+                " ".repeat(width - filled)
+            );
+            let _ = std::io::stderr().flush();
+        }
+    });
+    eprintln!();
+    let rows = exp::summarize(&outcomes);
+    exp::write_csv(out, &outcomes, &rows).map_err(|e| format!("writing {}: {e}", out.display()))?;
+    let metrics = [
+        ("avg_speed_mps", "average speed, m/s"),
+        ("avg_abs_jerk_mps3", "average |jerk|, m/s³"),
+        ("conflict_duration_s", "conflict duration, s"),
+    ];
+    let mut figures = Vec::new();
+    for (scenario, file, title, which) in [
+        (
+            ScenarioKind::LeftTurn,
+            "fig4_left_turn.svg",
+            "Unprotected left turn (Fig. 4)",
+            &metrics[..],
+        ),
+        (
+            ScenarioKind::Merge,
+            "fig7b_merge.svg",
+            "Merge (Fig. 7b)",
+            &metrics[..1],
+        ),
+    ] {
+        if rows.iter().any(|r| r.scenario == scenario) {
+            let path = out.join(file);
+            concord_sim::plot::bars(&path, title, &rows, scenario, which)?;
+            figures.push(path);
+        }
+    }
+    println!("| scenario | controller | speed | n | collisions | success | avg speed m/s | avg \\|jerk\\| m/s³ | conflict duration s | min TTC s | PET s |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    let f = |(m, ci): (f64, f64)| {
+        if m.is_nan() {
+            // Every episode's value is infinite (e.g. the occupancies never overlapped).
+            "∞".to_string()
+        } else if ci.is_finite() {
+            format!("{m:.2} ± {ci:.2}")
+        } else {
+            format!("{m:.2}")
+        }
+    };
+    for r in &rows {
+        let collisions = outcomes
+            .iter()
+            .filter(|o| {
+                o.episode.scenario == r.scenario
+                    && o.episode.controller == r.controller
+                    && o.episode.speed.round() == r.speed
+                    && o.metrics.collision
+            })
+            .count();
+        println!(
+            "| {} | {} | {:.0} | {} | {} | {:.0} % | {} | {} | {} | {} | {} |",
+            r.scenario.name(),
+            r.controller.name(),
+            r.speed,
+            r.n,
+            collisions,
+            r.get("success").0 * 100.0,
+            f(r.get("avg_speed_mps")),
+            f(r.get("avg_abs_jerk_mps3")),
+            f(r.get("conflict_duration_s")),
+            f(r.get("min_ttc_s")),
+            f(r.get("pet_s")),
+        );
+    }
+    let total_collisions = |c: ControllerKind| {
+        outcomes
+            .iter()
+            .filter(|o| o.episode.controller == c && o.metrics.collision)
+            .count()
+    };
+    println!();
+    for c in ControllerKind::ALL {
+        println!(
+            "{}: {} collisions in {} episodes",
+            c.name(),
+            total_collisions(c),
+            outcomes
+                .iter()
+                .filter(|o| o.episode.controller == c)
+                .count()
+        );
+    }
+    println!(
+        "wrote {}/episodes.csv, summary.csv, traces/ and {} in {:.0} s",
+        out.display(),
+        figures
+            .iter()
+            .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .collect::<Vec<_>>()
+            .join(", "),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
 }

@@ -2,9 +2,11 @@
 
     python highway_bridge.py --env intersection-v0 --seeds 50                  # Concord
     python highway_bridge.py --env intersection-v0 --seeds 50 --policy idle   # a baseline
+    python highway_bridge.py --env merge-v0 --seeds 50                         # Concord
 
 For ``--policy concord`` the bridge starts ``concord run --geometry highway-env-intersection``
-under a private service prefix and, for every environment step: turns the observation into a
+(``highway-env-merge`` for merge-v0, each with its ``deploy/`` configuration) under a private
+service prefix and, for every environment step: turns the observation into a
 ``SceneFrame`` (the ego and up to 32 tracked vehicles, in highway-env's own coordinates, which
 the built-in geometry uses), publishes it over iceoryx2, waits for the decision answering that
 frame's sequence number (the simulation does not advance until it arrives; after
@@ -30,6 +32,23 @@ are sent as 0 unless ``--estimate-accel`` (finite differences of tracked velocit
 
 Baseline policies (``idle``, ``faster``, ``slower``) send that constant ``DiscreteMetaAction``
 (highway-env's default action space, which steers along the route) and do not need Concord.
+
+merge-v0. The ego spawns at x = 30 on the right-hand lane (y = 4) of a two-lane road at 30 m/s;
+one car comes down the on-ramp and changes into the ego's lane on the auxiliary lane from
+x = 230, and the traffic around the ego, spawned at 28–32.5 m/s, slows to the lanes' 20 m/s
+speed limit. The core's ``highway-env-merge`` geometry models the ramp as a lane that tapers
+into the ego's lane at x = 250 (core/src/scene.rs, ``highway_env_merge``); the core only
+decides along its lane, so the ego never changes lanes (it steers along the planned
+trajectory, as in the intersection). merge-v0 ends an episode on a collision or once the ego
+passes x = 370 and has no time limit of its own, so an episode counts as *arrived* when the ego
+passes x = 370 without a collision; the bridge stops an episode after 40 s simulated (highway-v0's
+duration; at merge-v0's lowest reward speed, 20 m/s, the ego arrives after 17 s) and counts it
+as not arrived. merge-v0's reward cannot be computed for a ``ContinuousAction`` (it tests
+``action in [0, 2]``), so the bridge builds the environment with that one test fixed (see
+``make_merge_env``); nothing else changes. The obstacle that closes the auxiliary lane is left
+out of the observations: it is part of the road, not traffic. The baselines' constant actions
+are looked up by name, since merge-v0's action space has the lane changes too (IDLE is 1 in
+both, FASTER and SLOWER are 3 and 4 in merge-v0).
 
 Scene time. Frames are stamped with the simulation clock (a fixed monotonic origin plus the
 episode's simulated time), not the wall clock: lock-step runs faster or slower than real time,
@@ -65,8 +84,12 @@ sys.path.insert(0, HERE)
 
 import concord_wire as wire  # noqa: E402
 
-# Lane indices of the core's BuiltIn::HighwayEnvIntersection (core/src/scene.rs).
+# Lane indices of the core's BuiltIn::HighwayEnvIntersection and BuiltIn::HighwayEnvMerge
+# (core/src/scene.rs).
 HWI_EGO_LEFT = 0
+HWM_EGO_RIGHT = 0
+# merge-v0 ends the episode once the ego passes this x (MergeEnv._is_terminated).
+MERGE_END_X = 370.0
 
 
 def intersection_progress(x, y):
@@ -80,15 +103,70 @@ def intersection_progress(x, y):
     return 100.0 + 13.0 * math.pi / 2 + (-11.0 - x)
 
 
+def merge_progress(x, y):
+    """Distance along merge-v0's main road (x; the ego spawns at 30 m, arrival beyond 370 m)."""
+    return x
+
+
+def make_merge_env(config):
+    """merge-v0 (``highway_env.envs.merge_env:MergeEnv``, as ``gym.make("merge-v0")`` builds it)
+    with one fix: its ``_rewards`` tests ``action in [0, 2]`` for the lane-change penalty, which
+    raises for a ``ContinuousAction`` array (already in ``reset``). A continuous action changes
+    no lane, so it is passed on as no action. Dynamics, traffic and termination are
+    highway-env's; the bridge does not use the reward."""
+    from highway_env.envs.merge_env import MergeEnv
+
+    class ContinuousSafeMergeEnv(MergeEnv):
+        def _rewards(self, action):
+            return super()._rewards(action if np.ndim(action) == 0 else None)
+
+    import gymnasium as gym
+
+    return gym.wrappers.OrderEnforcing(ContinuousSafeMergeEnv(config=config))
+
+
+def intersection_arrived(env):
+    return bool(env.has_arrived(env.vehicle))
+
+
+def merge_arrived(env):
+    return bool(env.vehicle.position[0] > MERGE_END_X)
+
+
+# Per environment: the core's geometry and configuration file (under deploy/), the ego's route
+# lane, route progress and arrival, the top of ContinuousAction's speed range, the bridge's own
+# time limit (None: the environment's), how to build the environment (None: gym.make) and
+# configuration beyond the common one.
 ENVS = {
     "intersection-v0": {
         "geometry": "highway-env-intersection",
+        "config": "highway-env.toml",
         "route_lane": HWI_EGO_LEFT,
         "progress": intersection_progress,
+        "arrived": intersection_arrived,
+        "max_speed": 20.0,
+        "time_limit_s": None,
+        "make": None,
+        "scale_spawn": True,
+        "env_config": {},
+    },
+    "merge-v0": {
+        "geometry": "highway-env-merge",
+        "config": "highway-env-merge.toml",
+        "route_lane": HWM_EGO_RIGHT,
+        "progress": merge_progress,
+        "arrived": merge_arrived,
+        "max_speed": 40.0,  # Vehicle.MAX_SPEED; the ego spawns at 30 m/s
+        "time_limit_s": 40.0,
+        "make": make_merge_env,
+        "scale_spawn": False,
+        "env_config": {},
     },
 }
 
-DISCRETE = {"slower": 0, "idle": 1, "faster": 2}  # intersection-v0's DiscreteMetaAction
+# Constant DiscreteMetaAction baselines, by action name (intersection-v0 has the longitudinal
+# actions only, merge-v0 the lane changes too, so the indices differ).
+DISCRETE = {"slower": "SLOWER", "idle": "IDLE", "faster": "FASTER"}
 POLICIES = ("concord",) + tuple(DISCRETE)
 
 # highway-env's kinematic model (vehicle/kinematics.py): length 5 m, slip angle
@@ -97,11 +175,11 @@ VEHICLE_LENGTH = 5.0
 ACCEL_RANGE = (-8.0, 4.0)  # m/s²: Concord's emergency braking down to -8, its plans up to +3
 STEERING_RANGE = (-math.pi / 3, math.pi / 3)  # MDPVehicle.MAX_STEERING_ANGLE
 OBSERVED = 33  # the ego and wire.MAX_AGENTS others
-MAX_SPEED = 20.0
 
 
-def env_config(policy, policy_frequency):
+def env_config(policy, policy_frequency, spec=None):
     """highway-env configuration for ``policy`` (only the action type differs between them)."""
+    spec = spec or ENVS["intersection-v0"]
     cfg = {
         "observation": {
             "type": "Kinematics",
@@ -113,10 +191,14 @@ def env_config(policy, policy_frequency):
             "see_behind": True,
             "order": "sorted",
             "observe_intentions": False,
+            # merge-v0's obstacle closing the auxiliary lane is part of the road, not traffic.
+            "include_obstacles": False,
         },
         "policy_frequency": policy_frequency,
-        "spawn_probability": 0.6 / policy_frequency,
     }
+    if spec["scale_spawn"]:
+        cfg["spawn_probability"] = 0.6 / policy_frequency
+    cfg.update(spec["env_config"])
     if policy == "concord":
         cfg["action"] = {
             "type": "ContinuousAction",
@@ -124,7 +206,7 @@ def env_config(policy, policy_frequency):
             "lateral": True,
             "acceleration_range": list(ACCEL_RANGE),
             "steering_range": list(STEERING_RANGE),
-            "speed_range": [0.0, MAX_SPEED],
+            "speed_range": [0.0, spec["max_speed"]],
             "clip": True,
         }
     return cfg
@@ -439,6 +521,8 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
     speeds, min_risk, decisions, steps, timed_out = [], 0, 0, 0, False
     maneuvers = {}
     crashed = arrived = False
+    limit = spec["time_limit_s"]
+    discrete = None if name == "concord" else u.action_type.actions_indexes[DISCRETE[name]]
     while True:
         sim_time = steps * period
         if name == "concord":
@@ -452,17 +536,17 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
             m = wire.MANEUVERS[d.maneuver]
             maneuvers[m] = maneuvers.get(m, 0) + 1
         else:
-            action = DISCRETE[name]
+            action = discrete
         obs, _, terminated, truncated, info = env.step(action)
         steps += 1
         speeds.append(float(u.vehicle.speed))
         crashed = bool(u.vehicle.crashed)
-        arrived = bool(u.has_arrived(u.vehicle))
+        arrived = spec["arrived"](u)
         if verbose and name == "concord":
             print(f"  seed {seed} t={steps * period:5.2f} pos=({u.vehicle.position[0]:6.1f},"
                   f"{u.vehicle.position[1]:6.1f}) v={u.vehicle.speed:4.1f} {m} "
                   f"{wire.SOURCES[d.source]}", file=sys.stderr)
-        if terminated or truncated:
+        if terminated or truncated or (limit is not None and steps * period >= limit - 1e-9):
             break
     return {
         "seed": seed,
@@ -513,7 +597,8 @@ def main(argv=None):
     ap.add_argument("--concord", default=os.path.join(ROOT, "target", "release", "concord"),
                     help="concord binary (default target/release/concord)")
     ap.add_argument("--config", default=None,
-                    help="TOML for concord run --config (default deploy/highway-env.toml)")
+                    help="TOML for concord run --config (default deploy/highway-env.toml, "
+                    "deploy/highway-env-merge.toml for merge-v0)")
     ap.add_argument("--rate", type=float, default=100.0, help="core loop rate, Hz")
     ap.add_argument("--policy-frequency", type=int, default=5,
                     help="environment steps per simulated second (highway-env default 1)")
@@ -531,16 +616,17 @@ def main(argv=None):
     ap.add_argument("--json", default=None, help="write the results to this file")
     ap.add_argument("--verbose", action="store_true")
     args = ap.parse_args(argv)
+    spec = ENVS[args.env]
     if args.config is None:
-        default = os.path.join(ROOT, "deploy", "highway-env.toml")
+        default = os.path.join(ROOT, "deploy", spec["config"])
         args.config = default if os.path.exists(default) else None
 
     import gymnasium as gym
     import highway_env  # noqa: F401  (registers the environments)
 
-    spec = ENVS[args.env]
     period = 1.0 / args.policy_frequency
-    env = gym.make(args.env, config=env_config(args.policy, args.policy_frequency))
+    cfg = env_config(args.policy, args.policy_frequency, spec)
+    env = spec["make"](cfg) if spec["make"] else gym.make(args.env, config=cfg)
     policy = ConcordPolicy(args, spec, period) if args.policy == "concord" else None
     episodes = []
     started = time.monotonic()

@@ -2,7 +2,8 @@
 
 Needs the packages of requirements.txt (highway-env, iceoryx2) and a built `concord` binary
 ($CONCORD_BIN, default target/debug/concord). Runs the bridge's command line for two seeds of
-intersection-v0 (about 20 s) and one seed of a baseline, which needs no core.
+intersection-v0 (about 20 s), one seed of merge-v0 (a few seconds) and one seed of a baseline,
+which needs no core.
 """
 
 import json
@@ -17,16 +18,16 @@ import unittest
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
 CONCORD = os.environ.get("CONCORD_BIN", os.path.join(ROOT, "target", "debug", "concord"))
-SUMMARY = re.compile(r"^intersection-v0 (\w+): (\d+) seeds, collisions (\d+\.\d) %, "
+SUMMARY = re.compile(r"^(\S+) (\w+): (\d+) seeds, collisions (\d+\.\d) %, "
                      r"success (\d+\.\d) %, mean speed (\d+\.\d) m/s$")
 
 
-def run_bridge(*args):
+def run_bridge(*args, env="intersection-v0"):
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "result.json")
         proc = subprocess.run(
             [sys.executable, "-W", "ignore", os.path.join(HERE, "highway_bridge.py"),
-             "--env", "intersection-v0", "--json", out, *args],
+             "--env", env, "--json", out, *args],
             cwd=HERE, capture_output=True, text=True, timeout=120)
         if proc.returncode != 0:
             raise AssertionError(f"bridge failed ({proc.returncode}):\n{proc.stdout}\n{proc.stderr}")
@@ -68,23 +69,24 @@ class Following(unittest.TestCase):
 
 
 class HighwayBridge(unittest.TestCase):
-    def check_summary(self, stdout, result, policy, seeds):
+    def check_summary(self, stdout, result, policy, seeds, env="intersection-v0", top=20.0):
         last = stdout.strip().splitlines()[-1]
         m = SUMMARY.match(last)
         self.assertIsNotNone(m, f"summary line: {last!r}")
-        self.assertEqual(m.group(1), policy)
-        self.assertEqual(int(m.group(2)), seeds)
+        self.assertEqual(m.group(1), env)
+        self.assertEqual(m.group(2), policy)
+        self.assertEqual(int(m.group(3)), seeds)
         s = result["summary"]
         self.assertEqual(s["seeds"], seeds)
         self.assertEqual(len(result["episodes"]), seeds)
         for key in ("collision_rate", "success_rate"):
             self.assertTrue(0.0 <= s[key] <= 1.0, f"{key} = {s[key]}")
         self.assertLessEqual(s["collision_rate"] + s["success_rate"], 1.0 + 1e-9)
-        self.assertTrue(math.isfinite(s["mean_speed_mps"]) and 0.0 <= s["mean_speed_mps"] <= 20.0)
+        self.assertTrue(math.isfinite(s["mean_speed_mps"]) and 0.0 <= s["mean_speed_mps"] <= top)
         # The printed line rounds the JSON's numbers.
-        self.assertAlmostEqual(float(m.group(3)), 100 * s["collision_rate"], delta=0.051)
-        self.assertAlmostEqual(float(m.group(4)), 100 * s["success_rate"], delta=0.051)
-        self.assertAlmostEqual(float(m.group(5)), s["mean_speed_mps"], delta=0.051)
+        self.assertAlmostEqual(float(m.group(4)), 100 * s["collision_rate"], delta=0.051)
+        self.assertAlmostEqual(float(m.group(5)), 100 * s["success_rate"], delta=0.051)
+        self.assertAlmostEqual(float(m.group(6)), s["mean_speed_mps"], delta=0.051)
         for e in result["episodes"]:
             self.assertGreater(e["steps"], 0)
             self.assertFalse(e["crashed"] and e["arrived"])
@@ -104,6 +106,37 @@ class HighwayBridge(unittest.TestCase):
             # Every episode ends: a collision, an arrival or the 13 s limit.
             self.assertTrue(e["crashed"] or e["arrived"] or e["sim_time_s"] >= 13.0 - 1e-6, e)
         self.assertLessEqual(s["minimum_risk_decisions"], s["decisions"])
+
+    def test_concord_decides_every_step_of_a_merge_v0_seed(self):
+        self.assertTrue(os.path.exists(CONCORD), f"build concord first: {CONCORD}")
+        stdout, result = run_bridge("--policy", "concord", "--seeds", "1", "--concord", CONCORD,
+                                    env="merge-v0")
+        s = self.check_summary(stdout, result, "concord", 1, env="merge-v0", top=40.0)
+        self.assertEqual(s["timeouts"], 0, stdout)
+        self.assertEqual(s["decisions"], s["steps"])
+        # The default configuration for merge-v0 is deploy/highway-env-merge.toml.
+        self.assertTrue(result["args"]["config"].endswith("highway-env-merge.toml"))
+        e = result["episodes"][0]
+        self.assertEqual(e["decisions"], e["steps"])
+        self.assertEqual(sum(e["maneuvers"].values()), e["decisions"])
+        # The episode ends in a collision, past x = 370 (merge-v0's end) or at the bridge's 40 s.
+        self.assertTrue(e["crashed"] or e["sim_time_s"] >= 40.0 - 1e-6
+                        or e["final_position"][0] > 370.0, e)
+        self.assertEqual(e["arrived"], e["final_position"][0] > 370.0 and not e["crashed"])
+        # The ego stays in its lane (y = 4): the core plans along it.
+        self.assertAlmostEqual(e["final_position"][1], 4.0, delta=0.5)
+
+    def test_merge_progress_and_arrival(self):
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+
+        self.assertEqual(hb.merge_progress(120.0, 4.0), 120.0)
+        self.assertEqual(hb.MERGE_END_X, 370.0)
+        cfg = hb.env_config("concord", 5, hb.ENVS["merge-v0"])
+        # merge-v0 spawns the ego at 30 m/s: the continuous action must reach it.
+        self.assertGreaterEqual(cfg["action"]["speed_range"][1], 30.0)
+        self.assertNotIn("spawn_probability", cfg)
+        self.assertIn("spawn_probability", hb.env_config("concord", 5))
 
     def test_a_baseline_runs_without_concord(self):
         stdout, result = run_bridge("--policy", "idle", "--seeds", "1", "--concord",

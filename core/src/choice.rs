@@ -57,6 +57,11 @@ impl Maneuver {
             Maneuver::TurnRight => "turn_right",
         }
     }
+    /// True for the maneuver that gives way to crossing traffic (what an eHMI announces as
+    /// "please go ahead"); every other maneuver goes first.
+    pub fn gives_way(self) -> bool {
+        self == Maneuver::Decelerate
+    }
     /// False for a turn against the navigation instruction `route`.
     pub fn consistent_with(self, route: Turn) -> bool {
         match self {

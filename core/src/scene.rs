@@ -699,6 +699,9 @@ pub enum BuiltIn {
     /// unprotected left turn from the south approach and every lane that crosses or joins it.
     /// See [`highway_env_intersection`].
     HighwayEnvIntersection,
+    /// highway-env's `merge-v0` (version 1.12.1) in its own coordinates: the two-lane main
+    /// road the ego drives on and the on-ramp that joins its lane. See [`highway_env_merge`].
+    HighwayEnvMerge,
 }
 
 /// Lane indices of [`BuiltIn::PaperIntersection`].
@@ -782,6 +785,65 @@ pub mod highway_env_intersection {
     pub const LANES: usize = 8;
 }
 
+/// Lane indices and dimensions of [`BuiltIn::HighwayEnvMerge`].
+///
+/// highway-env (1.12.1, `MergeEnv._make_road`) builds a straight two-lane road of 4 m lanes
+/// along +x from x = 0 to 460 (nodes a → b at 230 → c at 310 → d), lane centres at y = 0
+/// (lane index 0) and y = 4 (lane index 1), in its y-down frame, where y = 4 is the right-hand
+/// lane as a driver sees it. The on-ramp runs along y = 14.5 from x = 0 to 150 (j → k), then
+/// a sine section of amplitude 3.25 m over 80 m, y = 11.25 + 3.25 cos(π (x − 150) / 80), brings
+/// it to y = 8 at x = 230 (k → b), where an 80 m auxiliary lane beside the right-hand lane
+/// (b → c, lane index 2) ends at an obstacle at (310, 8). Ramp traffic changes into the
+/// right-hand lane anywhere on the auxiliary lane, in practice at its start: highway-env's
+/// IDM/MOBIL merging car starts its lane change at x ≈ 237 and is across by x ≈ 250 when the
+/// gap allows. The ego spawns on the right-hand lane at x = 30 at 30 m/s, and the episode
+/// ends when it passes x = 370.
+///
+/// The core's lanes cross or join rather than change, so the ramp here is one lane that
+/// follows highway-env's ramp to the start of the auxiliary lane and then tapers into the
+/// right-hand lane over [`TAPER_M`], as [`BuiltIn::Merge`]'s ramp does: the conflict point
+/// with the ego's lane is the end of the taper, (250, 4). The sine section is sampled as
+/// chords 5 m apart (they stay within 2 cm of the curve). A ramp car still waiting on the
+/// auxiliary lane beyond the taper matches no lane. On the joint part of the ramp and the
+/// ego's lane an agent matches the ego's lane (the lower index).
+pub mod highway_env_merge {
+    /// Lane width, m (`AbstractLane.DEFAULT_WIDTH`).
+    pub const LANE_WIDTH_M: f64 = 4.0;
+    /// Where the main road ends, m (x of node d).
+    pub const ROAD_END_M: f64 = 460.0;
+    /// y of the left-hand main lane (highway-env lane index 0).
+    pub const LEFT_Y_M: f64 = 0.0;
+    /// y of the right-hand main lane (index 1), the ego's.
+    pub const RIGHT_Y_M: f64 = 4.0;
+    /// y of the ramp's straight approach (j → k).
+    pub const RAMP_Y_M: f64 = 14.5;
+    /// y of the auxiliary lane (b → c, index 2).
+    pub const AUX_Y_M: f64 = 8.0;
+    /// x where the ramp's sine section begins (node k).
+    pub const SINE_START_M: f64 = 150.0;
+    /// x where the sine section ends and the auxiliary lane begins (node b).
+    pub const AUX_START_M: f64 = 230.0;
+    /// x where the auxiliary lane ends at an obstacle (node c).
+    pub const AUX_END_M: f64 = 310.0;
+    /// Length along x of the core's taper from the auxiliary lane into the right-hand lane, m.
+    pub const TAPER_M: f64 = 20.0;
+    /// x where the ramp joins the ego's lane: the conflict point.
+    pub const JOIN_M: f64 = AUX_START_M + TAPER_M;
+    /// x beyond which highway-env ends the episode (`MergeEnv._is_terminated`).
+    pub const TERMINATION_X_M: f64 = 370.0;
+    /// Chord length along x of the sampled sine section, m.
+    pub const SINE_STEP_M: f64 = 5.0;
+
+    /// Right-hand main lane, y = 4 (highway-env `("a", "b", 1)` onwards): the ego's route.
+    pub const EGO_RIGHT: u8 = 0;
+    /// Left-hand main lane, y = 0 (`("a", "b", 0)` onwards); parallel, no conflict.
+    pub const MAIN_LEFT: u8 = 1;
+    /// On-ramp (`j → k → b`), tapering into the ego's lane from the auxiliary lane.
+    pub const RAMP: u8 = 2;
+    /// Number of lanes.
+    pub const LANES: usize = 3;
+}
+
 /// Intersection morphology 𝓘 = {P_stop, R_lane, L_ref} (eq. 2) with its conflict points.
 #[derive(Clone, Copy, Debug)]
 pub struct Morphology {
@@ -846,6 +908,10 @@ impl Morphology {
                     .expect("built-in merge geometry is valid")
             }
             BuiltIn::HighwayEnvIntersection => highway_env_intersection_lanes(),
+            BuiltIn::HighwayEnvMerge => {
+                return Morphology::new(&highway_env_merge_lanes())
+                    .expect("built-in highway-env merge geometry is valid")
+            }
         };
         Morphology::new(&lanes).expect("built-in intersection geometry is valid")
     }
@@ -1058,6 +1124,48 @@ fn highway_env_intersection_lanes() -> [Lane; highway_env_intersection::LANES] {
                 .line_to(v(-h, far)),
             Turn::Left,
         ),
+    ]
+}
+
+fn highway_env_merge_lanes() -> [Lane; highway_env_merge::LANES] {
+    use core::f64::consts::PI;
+    use highway_env_merge::*;
+    let v = Vec2::new;
+    let hw = 0.5 * LANE_WIDTH_M;
+    // Main lanes follow highway-env's nodes a → b → c → d. Their stop line is the join point
+    // (like BuiltIn::Merge's main lane); the ramp's is where its taper begins (the start of
+    // highway-env's auxiliary lane).
+    let main = |y: f64| {
+        Lane::builder(v(0.0, y))
+            .line_to(v(AUX_START_M, y))
+            .line_to(v(AUX_END_M, y))
+            .line_to(v(ROAD_END_M, y))
+            .build(hw, JOIN_M, Turn::Straight)
+            .expect("valid built-in lane")
+    };
+    let amplitude = 0.5 * (RAMP_Y_M - AUX_Y_M);
+    let centre = 0.5 * (RAMP_Y_M + AUX_Y_M);
+    let sine_len = AUX_START_M - SINE_START_M;
+    let mut ramp = Lane::builder(v(0.0, RAMP_Y_M)).line_to(v(SINE_START_M, RAMP_Y_M));
+    let chords = libm::ceil(sine_len / SINE_STEP_M) as usize;
+    for k in 1..=chords {
+        let x = SINE_START_M + sine_len * k as f64 / chords as f64;
+        let y = centre + amplitude * cos(PI * (x - SINE_START_M) / sine_len);
+        ramp = ramp.line_to(v(x, y));
+    }
+    let ramp = ramp
+        .line_to(v(JOIN_M, RIGHT_Y_M))
+        .line_to(v(ROAD_END_M, RIGHT_Y_M));
+    // Arc length of the ramp up to the start of the taper.
+    let built = ramp
+        .build(hw, 0.0, Turn::Straight)
+        .expect("valid built-in lane");
+    let taper_start = built.project(v(AUX_START_M, AUX_Y_M)).s;
+    [
+        main(RIGHT_Y_M),
+        main(LEFT_Y_M),
+        ramp.build(hw, taper_start, Turn::Straight)
+            .expect("valid built-in lane"),
     ]
 }
 

@@ -1,6 +1,6 @@
-//! The built-in geometry of highway-env's intersection-v0 (`BuiltIn::HighwayEnvIntersection`):
-//! lanes, conflict points against hand-computed circle intersections, and lane matching of
-//! poses as highway-env reports them.
+//! The built-in geometries of highway-env's intersection-v0 (`BuiltIn::HighwayEnvIntersection`)
+//! and merge-v0 (`BuiltIn::HighwayEnvMerge`, in `mod merge`): lanes, conflict points against
+//! hand-computed ones, and lane matching of poses as highway-env reports them.
 
 use concord_core::scene::highway_env_intersection::*;
 use concord_core::scene::{
@@ -151,4 +151,129 @@ fn a_core_on_the_geometry_sees_the_oncoming_car_as_a_risky_conflict() {
     let c = t.conflicts[0];
     assert!(c.is_risky(&Params::default().opm), "{c:?}");
     assert!(near(c.point, -2.0, 11.0 - 88f64.sqrt()));
+}
+
+// ---- merge-v0 (`BuiltIn::HighwayEnvMerge`) ----
+
+mod merge {
+    use concord_core::scene::highway_env_merge::*;
+    use concord_core::scene::{
+        AgentState, BuiltIn, Morphology, Turn, Vec2, MAX_LANES, MAX_LANE_POINTS,
+    };
+    use concord_core::{DecisionCore, Params};
+    use std::f64::consts::PI;
+
+    fn morph() -> Morphology {
+        Morphology::built_in(BuiltIn::HighwayEnvMerge)
+    }
+
+    fn near(p: Vec2, x: f64, y: f64, tol: f64) -> bool {
+        (p.x - x).abs() < tol && (p.y - y).abs() < tol
+    }
+
+    /// highway-env's `SineLane` k → b of merge-v0, as a function of x.
+    fn ramp_sine_y(x: f64) -> f64 {
+        11.25 + 3.25 * (PI * (x - SINE_START_M) / (AUX_START_M - SINE_START_M)).cos()
+    }
+
+    #[test]
+    fn lanes_reproduce_highway_env_merge_road() {
+        let m = morph();
+        assert_eq!(m.lanes().len(), LANES);
+        const { assert!(LANES <= MAX_LANES) };
+        for (i, lane) in m.lanes().iter().enumerate() {
+            assert!(lane.points().len() <= MAX_LANE_POINTS, "lane {i}");
+            assert_eq!(lane.half_width, 2.0, "lane {i}");
+            assert_eq!(lane.turn, Turn::Straight, "lane {i}");
+        }
+        // Main lanes: 460 m straight at y = 4 (the ego's) and y = 0; stop line at the join.
+        for (lane, y) in [(EGO_RIGHT, 4.0), (MAIN_LEFT, 0.0)] {
+            let l = m.lane(lane);
+            assert!((l.length() - 460.0).abs() < 1e-9);
+            assert!(near(l.points()[0], 0.0, y, 1e-9));
+            assert!(near(*l.points().last().unwrap(), 460.0, y, 1e-9));
+            assert_eq!(l.stop_s, JOIN_M);
+        }
+        // Ramp: highway-env's j → k along y = 14.5, then the sine section to (230, 8).
+        let ramp = m.lane(RAMP);
+        assert!(near(ramp.points()[0], 0.0, 14.5, 1e-9));
+        for x in [150.0, 160.0, 172.5, 190.0, 207.5, 220.0, 230.0] {
+            let f = ramp.project(Vec2::new(x, ramp_sine_y(x)));
+            assert!(f.l.abs() < 0.02, "x = {x}: {} m off the sine", f.l);
+        }
+        // The sine's steepest point (x = 190, y = 11.25) slopes at atan(3.25 π / 80).
+        let (p, tangent, _) = ramp.pose_at(ramp.project(Vec2::new(190.0, 11.25)).s, 0);
+        assert!(near(p, 190.0, 11.25, 0.02), "{p:?}");
+        assert!(
+            (tangent + (3.25 * PI / 80.0).atan()).abs() < 0.01,
+            "{tangent}"
+        );
+        // Its stop line is where highway-env's auxiliary lane begins.
+        let (stop, _, _) = ramp.pose_at(ramp.stop_s, 0);
+        assert!(near(stop, 230.0, 8.0, 1e-6), "{stop:?}");
+        // It ends on the ego's lane.
+        assert!(near(*ramp.points().last().unwrap(), 460.0, 4.0, 1e-9));
+    }
+
+    #[test]
+    fn the_ramp_joins_the_ego_lane_and_nothing_else_conflicts() {
+        let m = morph();
+        let (s_ego, s_ramp) = m
+            .conflict_between(EGO_RIGHT, RAMP)
+            .expect("the ramp joins the ego's lane");
+        assert!((s_ego - JOIN_M).abs() < 1e-6, "{s_ego}");
+        let on_ramp = m.lane(RAMP).pose_at(s_ramp, 0).0;
+        assert!(near(on_ramp, JOIN_M, 4.0, 1e-6), "{on_ramp:?}");
+        // The ramp reaches the join after its stop line, and the ego reaches it after its own.
+        assert!(s_ramp > m.lane(RAMP).stop_s);
+        assert!((m.lane(EGO_RIGHT).stop_s - s_ego).abs() < 1e-9);
+        assert!(m.conflict_between(EGO_RIGHT, MAIN_LEFT).is_none());
+        assert!(m.conflict_between(MAIN_LEFT, RAMP).is_none());
+        assert_eq!(m.conflicts().len(), 1);
+        // The join lies before highway-env's end of the episode.
+        const { assert!(JOIN_M < TERMINATION_X_M) };
+    }
+
+    #[test]
+    fn highway_env_poses_match_their_lanes() {
+        let m = morph();
+        let at = |x: f64, y: f64, heading: f64| {
+            let a = AgentState::moving(1, Vec2::new(x, y), heading, 25.0);
+            m.match_lane(a.pos, a.direction(), 1.0)
+                .map(|(lane, _)| lane)
+        };
+        // merge-v0's ego spawn: ("a", "b", 1) at 30 m, heading 0.
+        assert_eq!(at(30.0, 4.0, 0.0), Some(EGO_RIGHT));
+        assert_eq!(at(90.0, 0.0, 0.0), Some(MAIN_LEFT));
+        // The merging car spawns at 110 m on j → k; on the sine section it heads along it.
+        assert_eq!(at(110.0, 14.5, 0.0), Some(RAMP));
+        let slope = -(3.25 * PI / 80.0).atan();
+        assert_eq!(at(190.0, 11.25, slope), Some(RAMP));
+        // Starting its lane change on the auxiliary lane, it is on the taper.
+        assert_eq!(at(238.0, 7.5, -0.1), Some(RAMP));
+        // Once across, the shared part of the ramp is the ego's lane (the lower index).
+        assert_eq!(at(300.0, 4.0, 0.0), Some(EGO_RIGHT));
+    }
+
+    #[test]
+    fn a_core_on_the_geometry_sees_the_merging_car_as_a_conflict() {
+        let mut core =
+            DecisionCore::new(Params::default(), morph()).expect("default parameters are valid");
+        // Ego 50 m before the join at 20 m/s; the merging car 50 m before it along the ramp.
+        let ego = AgentState::moving(0, Vec2::new(JOIN_M - 50.0, 4.0), 0.0, 20.0);
+        let mut scene = concord_core::Scene::new(0.0, ego, EGO_RIGHT);
+        let slope = -(3.25 * PI / 80.0).atan();
+        scene.push(AgentState::moving(
+            1,
+            Vec2::new(205.0, ramp_sine_y(205.0)),
+            slope * 0.8,
+            20.0,
+        ));
+        core.step(&scene, 0.0, None).expect("a valid scene");
+        let t = core.triplet();
+        assert_eq!(t.n_conflicts, 1);
+        let c = t.conflicts[0];
+        assert!(near(c.point, JOIN_M, 4.0, 1e-6), "{c:?}");
+        assert!(c.is_risky(&Params::default().opm), "{c:?}");
+    }
 }

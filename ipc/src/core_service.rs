@@ -40,6 +40,8 @@ pub enum Geometry {
     Merge,
     /// highway-env's `intersection-v0`, in its coordinates (`bridges/python/highway_bridge.py`).
     HighwayEnvIntersection,
+    /// highway-env's `merge-v0`, in its coordinates (`bridges/python/highway_bridge.py`).
+    HighwayEnvMerge,
 }
 
 impl Geometry {
@@ -49,6 +51,7 @@ impl Geometry {
             Geometry::PaperIntersection => BuiltIn::PaperIntersection,
             Geometry::Merge => BuiltIn::Merge,
             Geometry::HighwayEnvIntersection => BuiltIn::HighwayEnvIntersection,
+            Geometry::HighwayEnvMerge => BuiltIn::HighwayEnvMerge,
         })
     }
 }

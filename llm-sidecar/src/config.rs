@@ -114,8 +114,10 @@ pub struct IntentConfig {
     /// Longest message accepted from a road user or the passenger, characters; longer text is
     /// cut.
     pub max_text_chars: usize,
-    /// Time allowed for parsing one message, s.
+    /// Time allowed for parsing one message once the server is free, s.
     pub deadline_s: f64,
+    /// Longest wait for a free request slot (advice requests may hold it), s.
+    pub queue_s: f64,
     /// Dialogue turns kept per road user and shown to the model.
     pub dialogue_turns: usize,
     /// Road users remembered at once (the oldest are forgotten).
@@ -128,6 +130,7 @@ impl Default for IntentConfig {
             weak_below: 0.7,
             max_text_chars: 200,
             deadline_s: 3.0,
+            queue_s: 10.0,
             dialogue_turns: 4,
             max_parties: 32,
         }
@@ -265,10 +268,13 @@ impl SidecarConfig {
             return Err("advice.reasoning_steps must be <= 8 and advice.max_tokens >= 16".into());
         }
         let i = &self.intent;
-        if !(0.0..=1.0).contains(&i.weak_below) || i.max_text_chars == 0 || !positive(i.deadline_s)
+        if !(0.0..=1.0).contains(&i.weak_below)
+            || i.max_text_chars == 0
+            || !positive(i.deadline_s)
+            || !positive(i.queue_s)
         {
             return Err(
-                "intent.weak_below in [0, 1], intent.max_text_chars >= 1, intent.deadline_s > 0"
+                "intent.weak_below in [0, 1], intent.max_text_chars >= 1, intent.deadline_s and queue_s > 0"
                     .into(),
             );
         }

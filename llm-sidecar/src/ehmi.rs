@@ -22,7 +22,7 @@ pub enum Stance {
 impl Stance {
     /// The stance of an executed maneuver; the minimum-risk fallback (`stopping`) yields.
     pub fn of(maneuver: Maneuver, stopping: bool) -> Stance {
-        if stopping || maneuver == Maneuver::Decelerate {
+        if stopping || maneuver.gives_way() {
             Stance::Yielding
         } else {
             Stance::Proceeding

@@ -106,6 +106,17 @@ pub struct Sidecar {
     texts_dropped: Arc<AtomicU64>,
 }
 
+/// When a call must be answered.
+#[derive(Clone, Copy, Debug)]
+enum Deadline {
+    /// By this instant, waiting for a request slot included (advice: the core's deadline).
+    At(Instant),
+    /// Within `call` once a slot is free, waiting at most `queue` for it (messages, eHMI
+    /// phrasing: they are not tied to a core cycle, and a message is not dropped because
+    /// advice requests held the server).
+    AfterQueue { queue: Duration, call: Duration },
+}
+
 /// An eHMI phrasing in flight.
 type Phrasing<'a> = Pin<Box<dyn Future<Output = Result<String, String>> + 'a>>;
 
@@ -283,7 +294,9 @@ impl Sidecar {
             &schema::advice_schema(self.cfg.advice.reasoning_steps),
             self.cfg.advice.max_tokens,
         );
-        let decoded = self.ask(&body, deadline, AdviceAnswer::decode).await;
+        let decoded = self
+            .ask(&body, Deadline::At(deadline), AdviceAnswer::decode)
+            .await;
         let mut s = self.state();
         let (ego_intent, agent_intents, n_agent_intents) = self.intents(&s);
         let mut advice = WireAdvice {
@@ -338,15 +351,28 @@ impl Sidecar {
     async fn ask<T>(
         &self,
         body: &serde_json::Value,
-        deadline: Instant,
+        deadline: Deadline,
         decode: impl FnOnce(&Answer) -> Result<T, ReplyError>,
     ) -> Result<(T, Reply), LlmError> {
-        let Some(_permit) = self.slot(deadline).await else {
+        let (queue_until, call_until) = match deadline {
+            Deadline::At(t) => (t, None),
+            Deadline::AfterQueue { queue, call } => (Instant::now() + queue, Some(call)),
+        };
+        let Some(_permit) = self.slot(queue_until).await else {
             return Err(LlmError::Timeout);
         };
-        let reply = self.client.call(body, deadline).await?;
+        let until = call_until.map_or(queue_until, |c| Instant::now() + c);
+        let reply = self.client.call(body, until).await?;
         let value = decode(&reply.answer).map_err(LlmError::Reply)?;
         Ok((value, reply))
+    }
+
+    /// The deadline of a message's parse or an eHMI phrasing.
+    fn text_deadline(&self) -> Deadline {
+        Deadline::AfterQueue {
+            queue: Duration::from_secs_f64(self.cfg.intent.queue_s),
+            call: Duration::from_secs_f64(self.cfg.intent.deadline_s),
+        }
     }
 
     /// A request slot, or `None` if none frees up before `deadline`.
@@ -402,7 +428,7 @@ impl Sidecar {
             }
             prompt::intent_messages(&speaker, &turns, &text, max)
         };
-        let deadline = now + Duration::from_secs_f64(self.cfg.intent.deadline_s);
+        let deadline = self.text_deadline();
         let body = self
             .client
             .body(&messages, "intent", &schema::intent_schema(), 96);
@@ -637,7 +663,7 @@ impl Sidecar {
     /// The model's eHMI text for a decision (§5 step 2), logged; `Err` carries the failure.
     async fn phrase(&self, doing: &'static str, tone: &'static str) -> Result<String, String> {
         let messages = prompt::phrase_messages(doing, tone);
-        let deadline = Instant::now() + Duration::from_secs_f64(self.cfg.intent.deadline_s);
+        let deadline = self.text_deadline();
         let body = self
             .client
             .body(&messages, "ehmi", &schema::phrase_schema(), 48);

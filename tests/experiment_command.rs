@@ -1,0 +1,45 @@
+//! `concord experiment paper` end to end at one repetition: the CSVs, the traces and the
+//! figures are written, and the summary covers every controller in both scenarios.
+
+#[test]
+fn experiment_paper_writes_csvs_traces_and_figures() {
+    let out = std::env::temp_dir().join(format!("concord-experiment-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_concord"))
+        .args([
+            "experiment",
+            "paper",
+            "--reps",
+            "1",
+            "--threads",
+            "2",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("concord runs");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let episodes = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    // 2 scenarios × 3 speeds × 1 repetition × 4 controllers, and the header.
+    assert_eq!(episodes.lines().count(), 1 + 24);
+    let summary = std::fs::read_to_string(out.join("summary.csv")).unwrap();
+    assert_eq!(summary.lines().count(), 1 + 24);
+    for c in ["idm", "game_theoretic", "concord_logit", "concord_oracle"] {
+        assert!(stdout.contains(&format!("| left_turn | {c} | 8 |")), "{c}");
+        assert!(stdout.contains(&format!("| merge | {c} | 8 |")), "{c}");
+    }
+    assert_eq!(std::fs::read_dir(out.join("traces")).unwrap().count(), 24);
+    for fig in ["fig4_left_turn.svg", "fig7b_merge.svg"] {
+        let svg = std::fs::read_to_string(out.join(fig)).unwrap();
+        assert!(
+            svg.starts_with("<svg") && svg.contains("concord_logit"),
+            "{fig}"
+        );
+    }
+    std::fs::remove_dir_all(&out).unwrap();
+}
