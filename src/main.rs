@@ -1,5 +1,7 @@
 //! `concord`: the command line of the Concord decision service.
 
+mod prompt_eval;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command as Process, ExitCode, Stdio};
 use std::time::Duration;
@@ -76,6 +78,30 @@ enum ExperimentArg {
         /// Worker threads [default: every core].
         #[arg(long)]
         threads: Option<usize>,
+    },
+    /// Fig. 5: OPM vs Raw vs Simple prompts on labelled simulator scenes (oracle labels):
+    /// accuracy, latency and reasoning steps, on any OpenAI-compatible server.
+    Prompts {
+        /// Base URL of the LLM server.
+        #[arg(long, default_value = "http://127.0.0.1:8181/v1")]
+        url: String,
+        #[arg(long, default_value_t = 30)]
+        scenes: usize,
+        #[arg(long, default_value = "results/prompts")]
+        out: PathBuf,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
+    /// Fits the saliency key (eq. 7) on simulated interactions; `--write` stores it as the
+    /// core's shipped key.
+    Saliency {
+        #[arg(long, default_value_t = 2000)]
+        scenes: usize,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Write the fitted key to this file (the core's is core/src/saliency_key.rs).
+        #[arg(long)]
+        write: Option<PathBuf>,
     },
     /// Random left turns over driver styles (aggressive, balanced, conservative), initial
     /// speeds (5–11 m/s) and HDV starts (±15 m), `--episodes` per controller.
@@ -330,6 +356,37 @@ fn main() -> ExitCode {
                 &out,
                 threads,
             ),
+            ExperimentArg::Prompts {
+                url,
+                scenes,
+                out,
+                seed,
+            } => prompt_eval::run(&url, scenes, seed, &out),
+            ExperimentArg::Saliency {
+                scenes,
+                seed,
+                write,
+            } => (|| {
+                use concord_sim::saliency_fit;
+                let fit = saliency_fit::fit(&saliency_fit::dataset(scenes, seed));
+                println!(
+                    "fitted key {:?} on {} scenes: top-1 {:.1} % (prior {:.1} %), log-likelihood {:.3} (prior {:.3})",
+                    fit.key,
+                    fit.examples,
+                    100.0 * fit.top1_fitted,
+                    100.0 * fit.top1_prior,
+                    fit.loglik_fitted,
+                    fit.loglik_prior
+                );
+                if let Some(path) = write {
+                    let command =
+                        format!("concord experiment saliency --scenes {scenes} --seed {seed}");
+                    std::fs::write(&path, saliency_fit::key_file(&fit, &command))
+                        .map_err(|e| format!("{}: {e}", path.display()))?;
+                    println!("wrote {}", path.display());
+                }
+                Ok(())
+            })(),
             ExperimentArg::Sweep {
                 episodes,
                 out,

@@ -4,7 +4,7 @@
 //!
 //! * [`IdmYield`], the paper's conservative baseline: IDM car-following, treating the conflict
 //!   zone as a stop line until the HDV has passed it or is at least `clear_gap_s` (6 s) away.
-//! * [`Stackelberg`], game-theoretic: the CAV leads, the HDV follows. Each step the CAV
+//! * [`Stackelberg`], game-theoretic: the CAV leads, the HDV follows. Every 0.5 s the CAV
 //!   picks an acceleration from {−3, −1.5, 0, 1, 2} m/s², predicting for each the HDV's best
 //!   response from the same set, both held for a 4 s horizon; each side's payoff is
 //!   `progress / horizon − 0.05 a² − 100 · overlap − 10 · close`, where `overlap` is 1 when both
@@ -21,7 +21,7 @@
 
 use concord_core::advice::Advice;
 use concord_core::scene::Turn;
-use concord_core::{DecisionCore, DecisionSource, Maneuver, Params};
+use concord_core::{Decision, DecisionCore, DecisionSource, Maneuver, Params};
 
 use crate::driver::{idm, DriverParams, HumanDriver, Signal};
 use crate::world::{World, DT};
@@ -85,9 +85,15 @@ impl Controller for IdmYield {
     }
 }
 
-/// Leader–follower game.
+/// Leader–follower game, decided every [`GAME_PERIOD_S`] and held in between.
 #[derive(Clone, Debug, Default)]
-pub struct Stackelberg;
+pub struct Stackelberg {
+    held: f64,
+    next_decision_s: f64,
+}
+
+/// How often the game is played, s (a receding horizon; drivers do not re-decide at 20 Hz).
+pub const GAME_PERIOD_S: f64 = 0.5;
 
 const ACCELS: [f64; 5] = [-3.0, -1.5, 0.0, 1.0, 2.0];
 const HORIZON_S: f64 = 4.0;
@@ -147,13 +153,21 @@ impl Controller for Stackelberg {
     fn act(&mut self, w: &World, _: &HumanDriver) -> Command {
         let (ego_d, hdv_d) = w.to_conflict();
         if ego_d < -w.zone_half_m || hdv_d < -w.zone_half_m {
-            // The conflict is resolved: drive on (behind the HDV in the merge).
+            // The conflict is resolved: drive on (behind the HDV in the merge) up to the
+            // game's top speed.
             let (gap, v_lead) = w.ego_leader();
             return Command {
-                accel: idm(w.ego.v, 10.0, gap, v_lead, &cav_params()),
+                accel: idm(w.ego.v, 14.0, gap, v_lead, &cav_params()),
                 ehmi: None,
             };
         }
+        if w.t + 1e-9 < self.next_decision_s {
+            return Command {
+                accel: self.held,
+                ehmi: None,
+            };
+        }
+        self.next_decision_s = w.t + GAME_PERIOD_S;
         let mut best = (f64::NEG_INFINITY, 0.0_f64);
         let holding = w.hdv.a;
         for a_c in ACCELS {
@@ -177,6 +191,7 @@ impl Controller for Stackelberg {
                 best = (u, a_c);
             }
         }
+        self.held = best.1;
         Command {
             accel: best.1,
             ehmi: None,
@@ -199,6 +214,8 @@ pub struct ConcordController {
     core: Box<DecisionCore>,
     advisor: Advisor,
     last_cycle: Option<u64>,
+    /// The newest decision.
+    pub last: Option<Decision>,
     /// Decisions taken by source (`DecisionSource` code).
     pub sources: [u64; 3],
 }
@@ -209,8 +226,14 @@ impl ConcordController {
             core: Box::new(DecisionCore::new(params, w.morph).expect("valid parameters")),
             advisor,
             last_cycle: None,
+            last: None,
             sources: [0; 3],
         }
+    }
+
+    /// The decision core (its OPM triplet describes the newest decision's scene).
+    pub fn core(&self) -> &DecisionCore {
+        &self.core
     }
 }
 
@@ -232,6 +255,7 @@ impl Controller for ConcordController {
             };
         };
         self.last_cycle = Some(d.cycle);
+        self.last = Some(d);
         self.sources[d.source as usize] += 1;
         let accel = d
             .trajectory
@@ -276,6 +300,11 @@ fn rollout_accel(m: Maneuver, w: &World) -> f64 {
 /// The fastest route-consistent maneuver that, executed for 8 s against a copy of the human
 /// driver (who hears the matching eHMI message), never brings the two cars within 3 m.
 pub fn oracle(w: &World, hdv: &HumanDriver) -> Maneuver {
+    best_maneuver(w, hdv, true)
+}
+
+/// [`oracle`], with or without the eHMI message reaching the driver in the rollouts.
+pub fn best_maneuver(w: &World, hdv: &HumanDriver, ehmi: bool) -> Maneuver {
     let route = w.morph.lane(w.ego.lane).turn;
     let mut best = (f64::NEG_INFINITY, Maneuver::Decelerate);
     for m in Maneuver::ALL {
@@ -290,7 +319,7 @@ pub fn oracle(w: &World, hdv: &HumanDriver) -> Maneuver {
         };
         let mut closest = f64::INFINITY;
         for _ in 0..(8.0 / DT) as usize {
-            let a_h = driver.act(&world, Some(signal));
+            let a_h = driver.act(&world, ehmi.then_some(signal));
             world.step(rollout_accel(m, &world), a_h);
             let (e, _) = world.pose(&world.ego);
             let (h, _) = world.pose(&world.hdv);
@@ -335,7 +364,7 @@ mod tests {
         let mut w = World::new(ScenarioKind::LeftTurn, 8.0, 0.0);
         w.ego.s = w.ego_conflict_s - 16.0;
         w.hdv.s = w.hdv_conflict_s - 16.0;
-        let a = Stackelberg.act(&w, &driver()).accel;
+        let a = Stackelberg::default().act(&w, &driver()).accel;
         assert!(a != 0.0, "keeping speed means an overlap");
         let (_, _, overlap, _) = predict(&w, 0.0, 0.0);
         assert!(overlap);

@@ -91,7 +91,7 @@ pub fn run_episode(e: &Episode, params: &Params) -> Outcome {
         _ => None,
     };
     let mut idm = IdmYield::new(e.speed);
-    let mut gt = Stackelberg;
+    let mut gt = Stackelberg::default();
     let mut samples = Vec::with_capacity((TIME_LIMIT_S / crate::world::DT) as usize + 1);
     loop {
         let (ego_d, hdv_d) = w.to_conflict();

@@ -1,0 +1,214 @@
+//! `concord experiment prompts`: OPM vs Raw vs Simple (paper §6.1.3, Fig. 5) on any
+//! OpenAI-compatible server.
+//!
+//! Labelled scenes come from the simulator: random left turns (driver style, initial speed,
+//! HDV start) driven by Concord logit-only and stopped at a random moment before the conflict
+//! is resolved. Each scene's label is the oracle's maneuver: the fastest route-consistent
+//! maneuver that, rolled out for 8 s against a copy of the human driver, never brings the cars
+//! within 3 m (`concord_sim::controllers::oracle`). Each scene becomes the advice request the
+//! core would issue, rendered in the three formats with the sidecar's own prompts (asking for
+//! up to 3 reasoning steps) and sent once per format; accuracy is the share of answers equal
+//! to the label, latency is the whole call, reasoning steps are the answer's `steps` count.
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use concord_core::scene::Style;
+use concord_core::Params;
+use concord_ipc::wire::{AdviceRequest, SceneFrame};
+use concord_sidecar::config::{LlmConfig, PromptFormat, SidecarConfig};
+use concord_sidecar::llm::LlmClient;
+use concord_sidecar::schema::{advice_schema, AdviceAnswer};
+use concord_sim::controllers::{best_maneuver, Advisor, ConcordController, Controller};
+use concord_sim::driver::HumanDriver;
+use concord_sim::world::{ScenarioKind, World, DT};
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+
+/// Reasoning steps asked for.
+const STEPS: usize = 3;
+
+/// One labelled scene.
+struct Labelled {
+    request: AdviceRequest,
+    history: Vec<SceneFrame>,
+    label: concord_core::Maneuver,
+}
+
+fn scenes(n: usize, seed: u64) -> Vec<Labelled> {
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let params = Params::default();
+    let mut out = Vec::new();
+    while out.len() < n {
+        let style =
+            [Style::Aggressive, Style::Balanced, Style::Conservative][rng.random_range(0..3)];
+        let speed = rng.random_range(5.0..11.0);
+        let mut w = World::new(ScenarioKind::LeftTurn, speed, rng.random_range(-15.0..15.0));
+        let mut hdv = HumanDriver::new(style, speed, rng.random());
+        let mut cav = ConcordController::new(params, &w, Advisor::None);
+        let stop_at = rng.random_range(0.5..4.0);
+        let mut history: Vec<SceneFrame> = Vec::new();
+        let mut seq = 0;
+        while w.t < stop_at {
+            let cmd = cav.act(&w, &hdv);
+            history.push(SceneFrame::from_scene(
+                seq,
+                (w.t * 1e9) as u64 + 1,
+                &w.scene(),
+            ));
+            seq += 1;
+            let a_h = hdv.act(&w, cmd.ehmi);
+            w.step(cmd.accel, a_h);
+        }
+        let (ego_d, hdv_d) = w.to_conflict();
+        let Some(decision) = cav.last else { continue };
+        if ego_d < w.zone_half_m || hdv_d < -w.zone_half_m {
+            continue;
+        }
+        let core = cav.core();
+        let opm = core.params().opm;
+        let request = AdviceRequest::from_core(
+            decision.cycle,
+            seq,
+            0,
+            u64::MAX,
+            &decision,
+            core.triplet(),
+            |c| c.is_risky(&opm),
+            core.morphology().lane(w.ego.lane).turn as u8,
+        );
+        // No message reaches the driver in the label's rollouts: the prompt has none either.
+        let label = best_maneuver(&w, &hdv, false);
+        // No label may fill more than half the set.
+        if out.iter().filter(|l: &&Labelled| l.label == label).count() >= n.div_ceil(2) {
+            continue;
+        }
+        let keep = (0.45 / DT) as usize;
+        let history = history.split_off(history.len().saturating_sub(keep));
+        out.push(Labelled {
+            request,
+            history,
+            label,
+        });
+    }
+    out
+}
+
+/// Runs the comparison against `url` and writes `prompts.csv` under `out`.
+pub fn run(url: &str, n: usize, seed: u64, out: &Path) -> Result<(), String> {
+    let cfg = SidecarConfig::default();
+    let llm = LlmConfig {
+        base_url: url.to_string(),
+        request_timeout_s: 60.0,
+        ..cfg.llm.clone()
+    };
+    let client = LlmClient::new(&llm)?;
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| e.to_string())?;
+    let model = rt.block_on(concord_sidecar::probe(&llm)).map_err(|e| {
+        format!("no LLM server answers at {url} ({e}); start one with `deploy/llm/llm.sh start`")
+    })?;
+    let set = scenes(n, seed);
+    let mut labels = [0usize; 5];
+    for s in &set {
+        labels[s.label as usize] += 1;
+    }
+    eprintln!(
+        "concord experiment prompts: {n} labelled scenes (labels: {}), model {model:?} at {url}",
+        concord_core::Maneuver::ALL
+            .iter()
+            .map(|m| format!("{} {}", m.name(), labels[*m as usize]))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let mut csv = String::from(
+        "scene,format,label,answer,correct,confidence,latency_ms,prompt_tokens,steps,error\n",
+    );
+    let mut table = Vec::new();
+    for format in PromptFormat::ALL {
+        let (mut correct, mut answered, mut steps, mut tokens) = (0, 0, 0, 0u64);
+        let mut latencies = Vec::new();
+        for (i, s) in set.iter().enumerate() {
+            eprint!("\r{} {}/{}   ", format.name(), i + 1, set.len());
+            let messages = concord_sidecar::prompt::advice_messages(
+                format,
+                STEPS,
+                cfg.advice.max_objects,
+                &s.request,
+                &s.history,
+                &[],
+                cfg.intent.max_text_chars,
+            );
+            let body = client.body(&messages, "advice", &advice_schema(STEPS), 160);
+            let started = Instant::now();
+            let result = rt.block_on(client.call(&body, started + Duration::from_secs(60)));
+            let ms = started.elapsed().as_secs_f64() * 1e3;
+            match result.map_err(|e| e.to_string()).and_then(|r| {
+                AdviceAnswer::decode(&r.answer)
+                    .map(|a| (a, r.answer.usage.prompt_tokens))
+                    .map_err(|e| e.to_string())
+            }) {
+                Ok((a, t)) => {
+                    answered += 1;
+                    latencies.push(ms);
+                    steps += a.steps.len();
+                    tokens += u64::from(t);
+                    let ok = a.maneuver == s.label;
+                    correct += usize::from(ok);
+                    let _ = writeln!(
+                        csv,
+                        "{i},{},{},{},{},{:.3},{ms:.0},{t},{},",
+                        format.name(),
+                        s.label.name(),
+                        a.maneuver.name(),
+                        ok as u8,
+                        a.confidence.unwrap_or(f64::NAN),
+                        a.steps.len()
+                    );
+                }
+                Err(e) => {
+                    let _ = writeln!(
+                        csv,
+                        "{i},{},{},,0,,{ms:.0},,,{}",
+                        format.name(),
+                        s.label.name(),
+                        e.replace([',', '\n'], " ")
+                    );
+                }
+            }
+        }
+        latencies.sort_by(f64::total_cmp);
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        table.push((
+            format,
+            correct,
+            answered,
+            mean(&latencies),
+            latencies
+                .get(latencies.len() / 2)
+                .copied()
+                .unwrap_or(f64::NAN),
+            steps as f64 / answered.max(1) as f64,
+            tokens as f64 / answered.max(1) as f64,
+        ));
+    }
+    eprintln!();
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    std::fs::write(out.join("prompts.csv"), csv).map_err(|e| e.to_string())?;
+    println!("| format | accuracy | answered | mean latency | p50 latency | reasoning steps | prompt tokens |");
+    println!("|---|---|---|---|---|---|---|");
+    for (f, correct, answered, mean, p50, steps, tokens) in table {
+        println!(
+            "| {} | {:.0} % ({correct}/{n}) | {answered}/{n} | {:.2} s | {:.2} s | {steps:.1} | {tokens:.0} |",
+            f.name(),
+            100.0 * correct as f64 / n.max(1) as f64,
+            mean / 1e3,
+            p50 / 1e3
+        );
+    }
+    println!("wrote {}", out.join("prompts.csv").display());
+    Ok(())
+}
