@@ -1,6 +1,6 @@
 //! `concord`: the command line of the Concord decision service.
 
-mod prompt_eval;
+mod llm_experiments;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command as Process, ExitCode, Stdio};
@@ -78,6 +78,13 @@ enum ExperimentArg {
         /// Worker threads [default: every core].
         #[arg(long)]
         threads: Option<usize>,
+        /// Also run Concord advised by the LLM server at this URL, in both timing modes (one
+        /// episode at a time: the server has one slot).
+        #[arg(long)]
+        llm: Option<String>,
+        /// Repetitions per speed of the LLM runs (left turn).
+        #[arg(long, default_value_t = 3)]
+        llm_reps: u32,
     },
     /// Fig. 5: OPM vs Raw vs Simple prompts on labelled simulator scenes (oracle labels):
     /// accuracy, latency and reasoning steps, on any OpenAI-compatible server.
@@ -350,18 +357,26 @@ fn main() -> ExitCode {
                 out,
                 seed,
                 threads,
-            } => experiment(
-                "paper",
-                concord_sim::experiment::paper_grid(reps, seed),
-                &out,
-                threads,
-            ),
+                llm,
+                llm_reps,
+            } => llm
+                .map(|url| llm_experiments::LlmAdvisor::new(&url).map(|_| (url, llm_reps)))
+                .transpose()
+                .and_then(|llm| {
+                    experiment(
+                        "paper",
+                        concord_sim::experiment::paper_grid(reps, seed),
+                        &out,
+                        threads,
+                        llm,
+                    )
+                }),
             ExperimentArg::Prompts {
                 url,
                 scenes,
                 out,
                 seed,
-            } => prompt_eval::run(&url, scenes, seed, &out),
+            } => llm_experiments::run(&url, scenes, seed, &out),
             ExperimentArg::Saliency {
                 scenes,
                 seed,
@@ -397,6 +412,7 @@ fn main() -> ExitCode {
                 concord_sim::experiment::sweep_grid(episodes, seed),
                 &out,
                 threads,
+                None,
             ),
         },
     };
@@ -840,6 +856,7 @@ fn experiment(
     grid: Vec<concord_sim::experiment::Episode>,
     out: &Path,
     threads: Option<usize>,
+    llm: Option<(String, u32)>,
 ) -> Result<(), String> {
     use concord_sim::experiment::{self as exp, ControllerKind};
     use concord_sim::world::ScenarioKind;
@@ -869,6 +886,40 @@ fn experiment(
         }
     });
     eprintln!();
+    let mut outcomes = outcomes;
+    if let Some((url, reps)) = llm {
+        // The LLM runs: left turns, one at a time, the same starts as the grid's first reps.
+        let episodes: Vec<_> = grid
+            .iter()
+            .filter(|e| {
+                e.scenario == ScenarioKind::LeftTurn
+                    && e.controller == ControllerKind::ConcordLogit
+                    && e.rep < reps
+            })
+            .flat_map(|e| {
+                [
+                    ControllerKind::ConcordLlmWait,
+                    ControllerKind::ConcordLlmLatency,
+                ]
+                .map(|c| concord_sim::experiment::Episode {
+                    controller: c,
+                    ..*e
+                })
+            })
+            .collect();
+        for (i, e) in episodes.iter().enumerate() {
+            eprint!(
+                "\rLLM runs: {}/{} episodes ({} at {url}) ",
+                i + 1,
+                episodes.len(),
+                e.controller.name()
+            );
+            let _ = std::io::stderr().flush();
+            let advisor = llm_experiments::LlmAdvisor::new(&url)?;
+            outcomes.push(exp::run_episode_with(e, &params, Some(Box::new(advisor))));
+        }
+        eprintln!();
+    }
     let rows = exp::summarize(&outcomes);
     exp::write_csv(out, &outcomes, &rows).map_err(|e| format!("writing {}: {e}", out.display()))?;
     let metrics = [
@@ -941,15 +992,19 @@ fn experiment(
             .count()
     };
     println!();
-    for c in ControllerKind::ALL {
+    for c in ControllerKind::EVERY {
+        if !outcomes.iter().any(|o| o.episode.controller == c) {
+            continue;
+        }
+        let mine = || outcomes.iter().filter(|o| o.episode.controller == c);
         println!(
-            "{}: {} collisions in {} episodes",
+            "{}: {} collisions in {} episodes; decisions logit {}, advice {}, minimum-risk {}",
             c.name(),
             total_collisions(c),
-            outcomes
-                .iter()
-                .filter(|o| o.episode.controller == c)
-                .count()
+            mine().count(),
+            mine().map(|o| o.sources[0]).sum::<u64>(),
+            mine().map(|o| o.sources[1]).sum::<u64>(),
+            mine().map(|o| o.sources[2]).sum::<u64>()
         );
     }
     println!(

@@ -1,5 +1,9 @@
 //! `concord experiment paper` end to end at one repetition: the CSVs, the traces and the
-//! figures are written, and the summary covers every controller in both scenarios.
+//! figures are written, and the summary covers every controller in both scenarios; with
+//! `--llm`, Concord advised by the real local LLM runs in both timing modes.
+
+#[path = "support/local_llm.rs"]
+mod local_llm;
 
 #[test]
 fn experiment_paper_writes_csvs_traces_and_figures() {
@@ -41,5 +45,44 @@ fn experiment_paper_writes_csvs_traces_and_figures() {
             "{fig}"
         );
     }
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+#[test]
+fn experiment_paper_with_the_local_llm_runs_both_timing_modes() {
+    let llm = local_llm::LocalLlm::start("experiment");
+    let out = std::env::temp_dir().join(format!("concord-experiment-llm-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_concord"))
+        .args([
+            "experiment",
+            "paper",
+            "--reps",
+            "1",
+            "--llm",
+            &llm.url,
+            "--llm-reps",
+            "1",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("concord runs");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    for c in ["concord_llm_wait", "concord_llm_latency"] {
+        for speed in [6, 8, 10] {
+            assert!(
+                stdout.contains(&format!("| left_turn | {c} | {speed} | 1 | 0 |")),
+                "{c} {speed}"
+            );
+        }
+    }
+    let episodes = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    assert_eq!(episodes.lines().count(), 1 + 24 + 6);
     std::fs::remove_dir_all(&out).unwrap();
 }

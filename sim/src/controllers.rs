@@ -18,6 +18,9 @@
 //!   every route-consistent maneuver out for 8 s under a copy of the human driver (who hears
 //!   the matching eHMI message) and advises the fastest one without conflict, with confidence
 //!   1; the core's gate and safety veto still apply.
+//! * [`ExternalAdvice`]: Concord advised from outside the simulation (an LLM through the
+//!   sidecar's prompts, see `concord experiment paper --llm`), with simulated time either
+//!   waiting for each answer or letting it land after its measured latency.
 
 use concord_core::advice::Advice;
 use concord_core::scene::Turn;
@@ -237,18 +240,10 @@ impl ConcordController {
     }
 }
 
-impl Controller for ConcordController {
-    fn act(&mut self, w: &World, hdv: &HumanDriver) -> Command {
-        let advice = match (self.advisor, self.last_cycle) {
-            (Advisor::Oracle, Some(id)) => Some(Advice {
-                request_id: id,
-                maneuver: oracle(w, hdv),
-                confidence: 1.0,
-                received_at_s: w.t,
-            }),
-            _ => None,
-        };
-        let Ok(d) = self.core.step(&w.scene(), w.t, advice.as_ref()) else {
+impl ConcordController {
+    /// One core step with `advice`, showing an eHMI message when `speaks`.
+    fn step_with(&mut self, w: &World, advice: Option<&Advice>, speaks: bool) -> Command {
+        let Ok(d) = self.core.step(&w.scene(), w.t, advice) else {
             return Command {
                 accel: -crate::world::MAX_BRAKE_MPS2,
                 ehmi: None,
@@ -261,7 +256,7 @@ impl Controller for ConcordController {
             .trajectory
             .sample(DT)
             .map_or(-3.0, |p| (p.speed - w.ego.v) / DT);
-        let ehmi = (self.advisor != Advisor::None).then(|| {
+        let ehmi = speaks.then(|| {
             if d.maneuver.gives_way() || d.source == DecisionSource::MinimumRisk {
                 Signal::Yield
             } else {
@@ -269,6 +264,114 @@ impl Controller for ConcordController {
             }
         });
         Command { accel, ehmi }
+    }
+}
+
+impl Controller for ConcordController {
+    fn act(&mut self, w: &World, hdv: &HumanDriver) -> Command {
+        let advice = match (self.advisor, self.last_cycle) {
+            (Advisor::Oracle, Some(id)) => Some(Advice {
+                request_id: id,
+                maneuver: oracle(w, hdv),
+                confidence: 1.0,
+                received_at_s: w.t,
+            }),
+            _ => None,
+        };
+        let speaks = self.advisor != Advisor::None;
+        self.step_with(w, advice.as_ref(), speaks)
+    }
+}
+
+/// Advice from outside the simulation (the sidecar's prompts and an LLM server).
+pub trait AdviceSource {
+    /// A_final and its confidence for the request the core issued with `decision` (its OPM
+    /// triplet is `core.triplet()`), and how long the answer took, s; `None` when it failed.
+    fn advise(
+        &mut self,
+        core: &DecisionCore,
+        decision: &Decision,
+        w: &World,
+    ) -> Option<(Maneuver, f64, f64)>;
+}
+
+/// When external advice reaches the core.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Timing {
+    /// Simulated time waits for the answer: it lands in the step that asked.
+    Wait,
+    /// The answer lands after its measured latency in simulated time (and may be late for
+    /// the core's deadline, as on the road).
+    Latency,
+}
+
+/// Concord with an external advisor asked every `period_s` of simulated time; the sidecar's
+/// eHMI speaks for the decision.
+pub struct ExternalAdvice {
+    inner: ConcordController,
+    source: Box<dyn AdviceSource>,
+    timing: Timing,
+    period_s: f64,
+    next_ask_s: f64,
+    pending: Option<Advice>,
+    held: Option<Advice>,
+}
+
+impl ExternalAdvice {
+    pub fn new(
+        params: Params,
+        w: &World,
+        source: Box<dyn AdviceSource>,
+        timing: Timing,
+        period_s: f64,
+    ) -> Self {
+        ExternalAdvice {
+            inner: ConcordController::new(params, w, Advisor::None),
+            source,
+            timing,
+            period_s,
+            next_ask_s: 0.0,
+            pending: None,
+            held: None,
+        }
+    }
+
+    /// Decisions by source (logit, advice, minimum risk).
+    pub fn sources(&self) -> [u64; 3] {
+        self.inner.sources
+    }
+}
+
+impl Controller for ExternalAdvice {
+    fn act(&mut self, w: &World, _: &HumanDriver) -> Command {
+        if let Some(a) = self.pending.filter(|a| w.t + 1e-9 >= a.received_at_s) {
+            self.held = Some(a);
+            self.pending = None;
+        }
+        if self.pending.is_none() && w.t + 1e-9 >= self.next_ask_s {
+            if let Some(d) = self.inner.last {
+                self.next_ask_s = w.t + self.period_s;
+                if let Some((maneuver, confidence, latency_s)) =
+                    self.source.advise(self.inner.core(), &d, w)
+                {
+                    let advice = Advice {
+                        request_id: d.cycle,
+                        maneuver,
+                        confidence,
+                        received_at_s: match self.timing {
+                            Timing::Wait => w.t,
+                            Timing::Latency => w.t + latency_s,
+                        },
+                    };
+                    match self.timing {
+                        Timing::Wait => self.held = Some(advice),
+                        Timing::Latency => self.pending = Some(advice),
+                    }
+                }
+            }
+        }
+        let held = self.held;
+        self.inner.step_with(w, held.as_ref(), true)
     }
 }
 
@@ -368,6 +471,52 @@ mod tests {
         assert!(a != 0.0, "keeping speed means an overlap");
         let (_, _, overlap, _) = predict(&w, 0.0, 0.0);
         assert!(overlap);
+    }
+
+    /// Always advises decelerating, confidently, after `latency` s.
+    struct Constant(f64);
+
+    impl AdviceSource for Constant {
+        fn advise(
+            &mut self,
+            _: &DecisionCore,
+            _: &Decision,
+            _: &World,
+        ) -> Option<(Maneuver, f64, f64)> {
+            Some((Maneuver::Decelerate, 0.9, self.0))
+        }
+    }
+
+    fn advice_decisions(timing: Timing, latency: f64) -> u64 {
+        let mut w = World::new(ScenarioKind::LeftTurn, 8.0, 0.0);
+        let mut x = ExternalAdvice::new(
+            Params::default(),
+            &w,
+            Box::new(Constant(latency)),
+            timing,
+            1.0,
+        );
+        let d = driver();
+        for _ in 0..60 {
+            let c = x.act(&w, &d);
+            w.step(c.accel, 0.0);
+        }
+        x.sources()[DecisionSource::Advice as usize]
+    }
+
+    #[test]
+    fn external_advice_lands_now_or_after_its_latency_and_late_advice_is_refused() {
+        assert!(
+            advice_decisions(Timing::Wait, 5.0) > 40,
+            "waiting: applied at once"
+        );
+        let timely = advice_decisions(Timing::Latency, 0.5);
+        assert!(timely > 0 && timely < advice_decisions(Timing::Wait, 0.5));
+        assert_eq!(
+            advice_decisions(Timing::Latency, 2.0),
+            0,
+            "after the 1.5 s deadline"
+        );
     }
 
     #[test]

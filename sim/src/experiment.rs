@@ -15,7 +15,10 @@ use concord_core::Params;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
-use crate::controllers::{Advisor, ConcordController, Controller, IdmYield, Stackelberg};
+use crate::controllers::{
+    AdviceSource, Advisor, ConcordController, Controller, ExternalAdvice, IdmYield, Stackelberg,
+    Timing,
+};
 use crate::driver::HumanDriver;
 use crate::metrics::{self, Metrics, Sample};
 use crate::world::{ScenarioKind, World};
@@ -30,9 +33,23 @@ pub enum ControllerKind {
     GameTheoretic,
     ConcordLogit,
     ConcordOracle,
+    /// Concord advised by an LLM, simulated time waiting for each answer.
+    ConcordLlmWait,
+    /// Concord advised by an LLM, each answer landing after its measured latency.
+    ConcordLlmLatency,
 }
 
 impl ControllerKind {
+    /// Every controller, the LLM ones last.
+    pub const EVERY: [ControllerKind; 6] = [
+        ControllerKind::Idm,
+        ControllerKind::GameTheoretic,
+        ControllerKind::ConcordLogit,
+        ControllerKind::ConcordOracle,
+        ControllerKind::ConcordLlmWait,
+        ControllerKind::ConcordLlmLatency,
+    ];
+    /// The controllers that need no LLM.
     pub const ALL: [ControllerKind; 4] = [
         ControllerKind::Idm,
         ControllerKind::GameTheoretic,
@@ -45,6 +62,8 @@ impl ControllerKind {
             ControllerKind::GameTheoretic => "game_theoretic",
             ControllerKind::ConcordLogit => "concord_logit",
             ControllerKind::ConcordOracle => "concord_oracle",
+            ControllerKind::ConcordLlmWait => "concord_llm_wait",
+            ControllerKind::ConcordLlmLatency => "concord_llm_latency",
         }
     }
 }
@@ -81,8 +100,20 @@ pub struct Outcome {
     pub sources: [u64; 3],
 }
 
-/// Runs one episode with the core's `params`.
+/// Runs one episode with the core's `params` (the LLM kinds need [`run_episode_with`]).
 pub fn run_episode(e: &Episode, params: &Params) -> Outcome {
+    run_episode_with(e, params, None)
+}
+
+/// How often an external advisor is asked, s of simulated time.
+pub const ADVICE_PERIOD_S: f64 = 1.0;
+
+/// Runs one episode; the LLM kinds take their advice from `source`.
+pub fn run_episode_with(
+    e: &Episode,
+    params: &Params,
+    source: Option<Box<dyn AdviceSource>>,
+) -> Outcome {
     let mut w = World::new(e.scenario, e.speed, e.hdv_offset_m);
     let mut hdv = HumanDriver::new(e.style, e.speed, e.seed);
     let mut concord = match e.controller {
@@ -90,6 +121,11 @@ pub fn run_episode(e: &Episode, params: &Params) -> Outcome {
         ControllerKind::ConcordOracle => Some(ConcordController::new(*params, &w, Advisor::Oracle)),
         _ => None,
     };
+    let timing = match e.controller {
+        ControllerKind::ConcordLlmLatency => Timing::Latency,
+        _ => Timing::Wait,
+    };
+    let mut external = source.map(|s| ExternalAdvice::new(*params, &w, s, timing, ADVICE_PERIOD_S));
     let mut idm = IdmYield::new(e.speed);
     let mut gt = Stackelberg::default();
     let mut samples = Vec::with_capacity((TIME_LIMIT_S / crate::world::DT) as usize + 1);
@@ -112,8 +148,11 @@ pub fn run_episode(e: &Episode, params: &Params) -> Outcome {
         let controller: &mut dyn Controller = match (e.controller, concord.as_mut()) {
             (ControllerKind::Idm, _) => &mut idm,
             (ControllerKind::GameTheoretic, _) => &mut gt,
-            (_, Some(c)) => c,
-            (_, None) => unreachable!("Concord kinds always have a core"),
+            (ControllerKind::ConcordLogit | ControllerKind::ConcordOracle, Some(c)) => c,
+            _ => match external.as_mut() {
+                Some(x) => x,
+                None => panic!("{} needs an advice source", e.controller.name()),
+            },
         };
         let cmd = controller.act(&w, &hdv);
         let a_h = hdv.act(&w, cmd.ehmi);
@@ -123,7 +162,10 @@ pub fn run_episode(e: &Episode, params: &Params) -> Outcome {
         episode: *e,
         metrics: metrics::compute(&samples, params.opm.delta_ttc_threshold_s, w.zone_half_m),
         samples,
-        sources: concord.map_or([0; 3], |c| c.sources),
+        sources: concord
+            .map(|c| c.sources)
+            .or(external.map(|x| x.sources()))
+            .unwrap_or([0; 3]),
     }
 }
 

@@ -8,11 +8,13 @@ use plotters::prelude::*;
 use crate::experiment::{ControllerKind, SummaryRow};
 use crate::world::ScenarioKind;
 
-const COLOURS: [RGBColor; 4] = [
+const COLOURS: [RGBColor; 6] = [
     RGBColor(120, 120, 120),
     RGBColor(70, 130, 180),
     RGBColor(230, 145, 56),
     RGBColor(60, 160, 90),
+    RGBColor(150, 90, 170),
+    RGBColor(200, 80, 90),
 ];
 
 /// Draws one panel per `(metric, label)` for `scenario` into `file` (SVG).
@@ -33,7 +35,11 @@ pub fn bars(
     let mut speeds: Vec<f64> = rows.iter().map(|r| r.speed).collect();
     speeds.sort_by(f64::total_cmp);
     speeds.dedup();
-    let width = 1.0 / (ControllerKind::ALL.len() as f64 + 1.0);
+    let kinds: Vec<ControllerKind> = ControllerKind::EVERY
+        .into_iter()
+        .filter(|c| rows.iter().any(|r| r.controller == *c))
+        .collect();
+    let width = 1.0 / (kinds.len() as f64 + 1.0);
     for (panel, (metric, label)) in panels.iter().zip(metrics) {
         let top = rows
             .iter()
@@ -67,8 +73,8 @@ pub fn bars(
             .y_desc(*label)
             .draw()
             .map_err(|e| e.to_string())?;
-        for (k, c) in ControllerKind::ALL.iter().enumerate() {
-            let colour = COLOURS[k % COLOURS.len()];
+        for (k, c) in kinds.iter().enumerate() {
+            let colour = COLOURS[*c as usize % COLOURS.len()];
             let mut bars = Vec::new();
             let mut whiskers = Vec::new();
             for (i, speed) in speeds.iter().enumerate() {

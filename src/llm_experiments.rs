@@ -1,5 +1,10 @@
-//! `concord experiment prompts`: OPM vs Raw vs Simple (paper §6.1.3, Fig. 5) on any
-//! OpenAI-compatible server.
+//! The experiments that need an LLM server (any OpenAI-compatible one):
+//!
+//! * [`LlmAdvisor`], Concord's advisor in closed loop (`concord experiment paper --llm URL`):
+//!   every request is the one `concord run` would issue, rendered and sent as the sidecar does
+//!   (OPM prompt, schema, confidence from log-probabilities); its answer becomes the advice
+//!   the core weighs, now (simulated time waits) or after the call's measured latency.
+//! * `concord experiment prompts`: OPM vs Raw vs Simple (paper §6.1.3, Fig. 5).
 //!
 //! Labelled scenes come from the simulator: random left turns (driver style, initial speed,
 //! HDV start) driven by Concord logit-only and stopped at a random moment before the conflict
@@ -20,11 +25,92 @@ use concord_ipc::wire::{AdviceRequest, SceneFrame};
 use concord_sidecar::config::{LlmConfig, PromptFormat, SidecarConfig};
 use concord_sidecar::llm::LlmClient;
 use concord_sidecar::schema::{advice_schema, AdviceAnswer};
-use concord_sim::controllers::{best_maneuver, Advisor, ConcordController, Controller};
+use concord_sim::controllers::{
+    best_maneuver, AdviceSource, Advisor, ConcordController, Controller,
+};
 use concord_sim::driver::HumanDriver;
 use concord_sim::world::{ScenarioKind, World, DT};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
+
+/// Concord's LLM advisor in the simulation.
+pub struct LlmAdvisor {
+    client: LlmClient,
+    rt: tokio::runtime::Runtime,
+    cfg: SidecarConfig,
+}
+
+impl LlmAdvisor {
+    /// An advisor on the server at `url`; fails when it does not answer.
+    pub fn new(url: &str) -> Result<Self, String> {
+        let cfg = SidecarConfig::default();
+        let llm = LlmConfig {
+            base_url: url.to_string(),
+            request_timeout_s: 60.0,
+            ..cfg.llm.clone()
+        };
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .map_err(|e| e.to_string())?;
+        rt.block_on(concord_sidecar::probe(&llm)).map_err(|e| {
+            format!(
+                "no LLM server answers at {url} ({e}); start one with `deploy/llm/llm.sh start`"
+            )
+        })?;
+        Ok(LlmAdvisor {
+            client: LlmClient::new(&llm)?,
+            rt,
+            cfg,
+        })
+    }
+}
+
+impl AdviceSource for LlmAdvisor {
+    fn advise(
+        &mut self,
+        core: &concord_core::DecisionCore,
+        decision: &concord_core::Decision,
+        w: &World,
+    ) -> Option<(concord_core::Maneuver, f64, f64)> {
+        let opm = core.params().opm;
+        let request = AdviceRequest::from_core(
+            decision.cycle,
+            decision.cycle,
+            0,
+            u64::MAX,
+            decision,
+            core.triplet(),
+            |c| c.is_risky(&opm),
+            core.morphology().lane(w.ego.lane).turn as u8,
+        );
+        let messages = concord_sidecar::prompt::advice_messages(
+            PromptFormat::Opm,
+            self.cfg.advice.reasoning_steps,
+            self.cfg.advice.max_objects,
+            &request,
+            &[],
+            &[],
+            self.cfg.intent.max_text_chars,
+        );
+        let body = self.client.body(
+            &messages,
+            "advice",
+            &advice_schema(self.cfg.advice.reasoning_steps),
+            self.cfg.advice.max_tokens,
+        );
+        let started = Instant::now();
+        let reply = self
+            .rt
+            .block_on(self.client.call(&body, started + Duration::from_secs(60)))
+            .ok()?;
+        let answer = AdviceAnswer::decode(&reply.answer).ok()?;
+        let confidence = answer
+            .confidence
+            .unwrap_or(self.cfg.llm.confidence_without_logprobs);
+        Some((answer.maneuver, confidence, started.elapsed().as_secs_f64()))
+    }
+}
 
 /// Reasoning steps asked for.
 const STEPS: usize = 3;
