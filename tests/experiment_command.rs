@@ -5,29 +5,29 @@
 #[path = "support/local_llm.rs"]
 mod local_llm;
 
-#[test]
-fn experiment_paper_writes_csvs_traces_and_figures() {
-    let out = std::env::temp_dir().join(format!("concord-experiment-{}", std::process::id()));
+/// Runs `concord experiment paper ARGS --out DIR` in a fresh directory; returns it and stdout.
+fn paper(tag: &str, args: &[&str]) -> (std::path::PathBuf, String) {
+    let out = std::env::temp_dir().join(format!("concord-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
     let run = std::process::Command::new(env!("CARGO_BIN_EXE_concord"))
-        .args([
-            "experiment",
-            "paper",
-            "--reps",
-            "1",
-            "--threads",
-            "2",
-            "--out",
-        ])
+        .args(["experiment", "paper"])
+        .args(args)
+        .arg("--out")
         .arg(&out)
         .output()
         .expect("concord runs");
-    let stdout = String::from_utf8_lossy(&run.stdout);
+    let stdout = String::from_utf8_lossy(&run.stdout).into_owned();
     assert!(
         run.status.success(),
         "{stdout}{}",
         String::from_utf8_lossy(&run.stderr)
     );
+    (out, stdout)
+}
+
+#[test]
+fn experiment_paper_writes_csvs_traces_and_figures() {
+    let (out, stdout) = paper("experiment", &["--reps", "1", "--threads", "2"]);
     let episodes = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
     // 2 scenarios × 3 speeds × 1 repetition × 4 controllers, and the header.
     assert_eq!(episodes.lines().count(), 1 + 24);
@@ -51,28 +51,9 @@ fn experiment_paper_writes_csvs_traces_and_figures() {
 #[test]
 fn experiment_paper_with_the_local_llm_runs_both_timing_modes() {
     let llm = local_llm::LocalLlm::start("experiment");
-    let out = std::env::temp_dir().join(format!("concord-experiment-llm-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&out);
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_concord"))
-        .args([
-            "experiment",
-            "paper",
-            "--reps",
-            "1",
-            "--llm",
-            &llm.url,
-            "--llm-reps",
-            "1",
-            "--out",
-        ])
-        .arg(&out)
-        .output()
-        .expect("concord runs");
-    let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(
-        run.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&run.stderr)
+    let (out, stdout) = paper(
+        "experiment-llm",
+        &["--reps", "1", "--llm", &llm.url, "--llm-reps", "1"],
     );
     for c in ["concord_llm_wait", "concord_llm_latency"] {
         for speed in [6, 8, 10] {

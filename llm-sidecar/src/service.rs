@@ -3,7 +3,9 @@
 //!
 //! * **Advice.** One request at a time, the newest: while a request is in flight, a newer one
 //!   that describes a different situation (another logit favourite, another set of risky
-//!   conflicts, another passenger intent) cancels it; a newer one of the same situation waits.
+//!   conflicts, another passenger intent) cancels it, unless the one in flight itself replaced
+//!   a cancelled request (so a slow server still answers every other request); a newer one of
+//!   the same situation waits.
 //!   Every answer, or failure with its reason, is published with the request id and the
 //!   intents known so far, which is how intents reach the core.
 //! * **Intents.** Each message is parsed with the dialogue so far; a weak intent (< 0.7) is
@@ -222,6 +224,9 @@ impl Sidecar {
 
     /// Serves advice requests until the bus closes.
     pub async fn advice_worker(&self, mut rx: watch::Receiver<Option<AdviceRequest>>) {
+        // A request that replaced a cancelled one runs to its end: when situations change
+        // faster than the server answers, every other request still gets its answer.
+        let mut after_cancel = false;
         'next: loop {
             if rx.changed().await.is_err() {
                 return;
@@ -245,7 +250,10 @@ impl Sidecar {
             tokio::pin!(work);
             loop {
                 tokio::select! {
-                    () = &mut work => continue 'next,
+                    () = &mut work => {
+                        after_cancel = false;
+                        continue 'next;
+                    }
                     changed = rx.changed() => {
                         if changed.is_err() {
                             return;
@@ -253,7 +261,8 @@ impl Sidecar {
                         let newer = *rx.borrow();
                         if let Some(n) = newer {
                             self.state().request = Some(n);
-                            if situation(&n) != here {
+                            if situation(&n) != here && !after_cancel {
+                                after_cancel = true;
                                 self.state().counters.cancelled += 1;
                                 // Unseen: the outer loop takes it at once.
                                 rx.mark_changed();
