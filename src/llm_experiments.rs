@@ -33,11 +33,13 @@ use concord_sim::world::{ScenarioKind, World, DT};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
-/// Concord's LLM advisor in the simulation.
+/// Concord's LLM advisor in the simulation; also the client of the prompt comparison.
 pub struct LlmAdvisor {
     client: LlmClient,
     rt: tokio::runtime::Runtime,
     cfg: SidecarConfig,
+    /// The model the server reports.
+    model: String,
 }
 
 impl LlmAdvisor {
@@ -53,7 +55,7 @@ impl LlmAdvisor {
             .enable_all()
             .build()
             .map_err(|e| e.to_string())?;
-        rt.block_on(concord_sidecar::probe(&llm)).map_err(|e| {
+        let model = rt.block_on(concord_sidecar::probe(&llm)).map_err(|e| {
             format!(
                 "no LLM server answers at {url} ({e}); start one with `deploy/llm/llm.sh start`"
             )
@@ -62,6 +64,7 @@ impl LlmAdvisor {
             client: LlmClient::new(&llm)?,
             rt,
             cfg,
+            model,
         })
     }
 }
@@ -73,16 +76,14 @@ impl AdviceSource for LlmAdvisor {
         decision: &concord_core::Decision,
         w: &World,
     ) -> Option<(concord_core::Maneuver, f64, f64)> {
-        let opm = core.params().opm;
         let request = AdviceRequest::from_core(
             decision.cycle,
             decision.cycle,
             0,
             u64::MAX,
             decision,
-            core.triplet(),
-            |c| c.is_risky(&opm),
-            core.morphology().lane(w.ego.lane).turn as u8,
+            core,
+            w.ego.lane,
         );
         let messages = concord_sidecar::prompt::advice_messages(
             PromptFormat::Opm,
@@ -153,16 +154,14 @@ fn scenes(n: usize, seed: u64) -> Vec<Labelled> {
             continue;
         }
         let core = cav.core();
-        let opm = core.params().opm;
         let request = AdviceRequest::from_core(
             decision.cycle,
             seq,
             0,
             u64::MAX,
             &decision,
-            core.triplet(),
-            |c| c.is_risky(&opm),
-            core.morphology().lane(w.ego.lane).turn as u8,
+            core,
+            w.ego.lane,
         );
         // No message reaches the driver in the label's rollouts: the prompt has none either.
         let label = best_maneuver(&w, &hdv, false);
@@ -183,20 +182,12 @@ fn scenes(n: usize, seed: u64) -> Vec<Labelled> {
 
 /// Runs the comparison against `url` and writes `prompts.csv` under `out`.
 pub fn run(url: &str, n: usize, seed: u64, out: &Path) -> Result<(), String> {
-    let cfg = SidecarConfig::default();
-    let llm = LlmConfig {
-        base_url: url.to_string(),
-        request_timeout_s: 60.0,
-        ..cfg.llm.clone()
-    };
-    let client = LlmClient::new(&llm)?;
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .map_err(|e| e.to_string())?;
-    let model = rt.block_on(concord_sidecar::probe(&llm)).map_err(|e| {
-        format!("no LLM server answers at {url} ({e}); start one with `deploy/llm/llm.sh start`")
-    })?;
+    let LlmAdvisor {
+        client,
+        rt,
+        cfg,
+        model,
+    } = LlmAdvisor::new(url)?;
     let set = scenes(n, seed);
     let mut labels = [0usize; 5];
     for s in &set {

@@ -186,13 +186,41 @@ pub fn profile(m: Maneuver, ctx: &EgoContext, p: &ChoiceParams) -> Profile {
     }
 }
 
-/// IDM acceleration (Treiber et al. 2000), m/s²: a[1 − (v/v₀)⁴ − (s*/s)²],
-/// s* = s₀ + vT + vΔv / (2√(ab)).
+/// Parameters of the Intelligent Driver Model.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Idm {
+    /// Maximum acceleration a and comfortable deceleration b, m/s².
+    pub max_accel_mps2: f64,
+    pub comfort_decel_mps2: f64,
+    /// Minimum gap s₀, m; time headway T, s; desired speed v₀, m/s.
+    pub min_gap_m: f64,
+    pub headway_s: f64,
+    pub desired_speed_mps: f64,
+}
+
+impl Idm {
+    /// IDM acceleration (Treiber et al. 2000), m/s², at speed `v` with a leader `gap` m ahead
+    /// closing at `dv` m/s (an infinite gap: free road): a[1 − (v/v₀)⁴ − (s*/s)²],
+    /// s* = s₀ + vT + vΔv / (2√(ab)).
+    pub fn accel(&self, v: f64, gap: f64, dv: f64) -> f64 {
+        let (a, b) = (self.max_accel_mps2, self.comfort_decel_mps2);
+        let s_star = self.min_gap_m + (v * self.headway_s + v * dv / (2.0 * sqrt(a * b))).max(0.0);
+        let free = v / self.desired_speed_mps.max(0.1);
+        let interaction = s_star / gap.max(0.1);
+        a * (1.0 - free * free * free * free - interaction * interaction)
+    }
+}
+
+/// The core's IDM (its parameters in [`ChoiceParams`]); see [`Idm::accel`].
 pub fn idm_accel(v: f64, gap: f64, dv: f64, p: &ChoiceParams) -> f64 {
-    let (a, b) = (p.idm_max_accel_mps2, p.idm_comfort_decel_mps2);
-    let s_star = p.idm_min_gap_m + (v * p.idm_headway_s + v * dv / (2.0 * sqrt(a * b))).max(0.0);
-    let free = v / p.desired_speed_mps.max(0.1);
-    a * (1.0 - free * free * free * free - (s_star / gap.max(0.1)) * (s_star / gap.max(0.1)))
+    Idm {
+        max_accel_mps2: p.idm_max_accel_mps2,
+        comfort_decel_mps2: p.idm_comfort_decel_mps2,
+        min_gap_m: p.idm_min_gap_m,
+        headway_s: p.idm_headway_s,
+        desired_speed_mps: p.desired_speed_mps,
+    }
+    .accel(v, gap, dv)
 }
 
 /// Everything the choice stage computed for one scene.

@@ -494,17 +494,14 @@ impl Loop<'_> {
             self.decisions_since_request = 0;
             let issued = secs(started);
             let deadline = issued + self.core.params().advice.deadline_s;
-            let opm = self.core.params().opm;
-            let route = self.core.morphology().lane(scene.ego_lane).turn as u8;
             let request = AdviceRequest::from_core(
                 decision.cycle,
                 f.sequence,
                 started,
                 (deadline * 1e9) as u64,
                 &decision,
-                self.core.triplet(),
-                |c| c.is_risky(&opm),
-                route,
+                self.core,
+                scene.ego_lane,
             );
             if iox::send(&self.ports.request, &request).is_err() {
                 self.publish_failures += 1;

@@ -12,7 +12,9 @@ use concord_core::scene::{
     AgentKind, AgentState, ExplicitIntent, ProcessState, Rated, Scene, TurnSignal, Vec2, MAX_AGENTS,
 };
 use concord_core::trajectory::MAX_POINTS;
-use concord_core::{opm, AdviceVerdict, Decision, DecisionSource, FallbackReason, Maneuver};
+use concord_core::{
+    opm, AdviceVerdict, Decision, DecisionCore, DecisionSource, FallbackReason, Maneuver,
+};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Code for an absent optional value (unknown intent dimension, no lane, no conflict).
@@ -470,18 +472,20 @@ pub struct AdviceRequest {
 }
 
 impl AdviceRequest {
-    /// Builds a request from the core's triplet after a step.
-    #[allow(clippy::too_many_arguments)]
+    /// Builds the request for `decision`, the newest step of `core` (its OPM triplet), whose
+    /// ego follows lane `ego_lane` (its turn is the navigation instruction).
     pub fn from_core(
         request_id: u64,
         scene_sequence: u64,
         issued_ns: u64,
         deadline_ns: u64,
         decision: &Decision,
-        triplet: &opm::OpmTriplet,
-        risky: impl Fn(&opm::ConflictPair) -> bool,
-        route_turn: u8,
+        core: &DecisionCore,
+        ego_lane: u8,
     ) -> Self {
+        let triplet = core.triplet();
+        let opm = core.params().opm;
+        let route_turn = core.morphology().lane(ego_lane).turn as u8;
         let mut conflicts = [WireConflict::default(); WIRE_OBJECTS];
         for (w, c) in conflicts.iter_mut().zip(triplet.conflicts()) {
             *w = WireConflict {
@@ -498,7 +502,7 @@ impl AdviceRequest {
                     .find(|o| o.agent == c.agent)
                     .map(|o| o.id)
                     .unwrap_or(u32::MAX),
-                risky: u8::from(risky(c)),
+                risky: u8::from(c.is_risky(&opm)),
                 reserved: [0; 3],
             };
         }

@@ -59,16 +59,14 @@ fn weigh(scene: &Scene, advised: Option<(Maneuver, f64)>) -> (AdviceRequest, Dec
     )
     .unwrap();
     let first = core.step(scene, scene.time_s, None).unwrap();
-    let opm = core.params().opm;
     let request = AdviceRequest::from_core(
         first.cycle,
         1,
         0,
         1_500_000_000,
         &first,
-        core.triplet(),
-        |c| c.is_risky(&opm),
-        core.morphology().lane(scene.ego_lane).turn as u8,
+        &core,
+        scene.ego_lane,
     );
     let mut later = *scene;
     later.time_s += 0.05;

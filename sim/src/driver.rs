@@ -32,6 +32,7 @@
 
 use std::collections::VecDeque;
 
+use concord_core::choice::Idm;
 use concord_core::scene::Style;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
@@ -103,15 +104,16 @@ impl DriverParams {
 }
 
 /// IDM acceleration at speed `v` towards `v0`, with a leader `gap` m ahead at speed `v_lead`
-/// (no leader: `gap` infinite), m/s².
+/// (no leader: `gap` infinite), m/s²: the core's IDM with the driver's parameters.
 pub fn idm(v: f64, v0: f64, gap: f64, v_lead: f64, p: &DriverParams) -> f64 {
-    let free = 1.0 - (v / v0.max(0.1)).powi(4);
-    if !gap.is_finite() {
-        return p.a_max * free;
+    Idm {
+        max_accel_mps2: p.a_max,
+        comfort_decel_mps2: p.b_comf,
+        min_gap_m: p.s0_m,
+        headway_s: p.headway_s,
+        desired_speed_mps: v0,
     }
-    let s_star = p.s0_m
-        + (v * p.headway_s + v * (v - v_lead) / (2.0 * (p.a_max * p.b_comf).sqrt())).max(0.0);
-    p.a_max * (free - (s_star / gap.max(0.1)).powi(2))
+    .accel(v, gap, v - v_lead)
 }
 
 /// Time to cover `d` m at speed `v` (guarded near standstill), s.

@@ -139,7 +139,6 @@ fn snapshot(frame: u64, seed: u64) -> Snapshot {
     }
     let (decision, scene, stamp_ns, seq) = last.expect("at least one frame");
     // As `concord run` issues it (ipc/src/core_service.rs, `decide_on`).
-    let opm = core.params().opm;
     let deadline_s = scene.time_s + core.params().advice.deadline_s;
     let request = AdviceRequest::from_core(
         decision.cycle,
@@ -147,9 +146,8 @@ fn snapshot(frame: u64, seed: u64) -> Snapshot {
         stamp_ns,
         (deadline_s * 1e9) as u64,
         &decision,
-        core.triplet(),
-        |c| c.is_risky(&opm),
-        core.morphology().lane(scene.ego_lane).turn as u8,
+        &core,
+        scene.ego_lane,
     );
     Snapshot {
         request,
