@@ -28,7 +28,11 @@ would start with a phantom outward drift.
 Perception. Kinematics observations (absolute x, y, vx, vy, heading of up to 33 vehicles,
 unnormalised, including those behind) carry no identities; a nearest-neighbour tracker with a
 constant-velocity prediction gives each vehicle a stable id. Accelerations of other vehicles
-are sent as 0 unless ``--estimate-accel`` (finite differences of tracked velocities).
+are sent as 0 unless ``--estimate-accel`` (finite differences of tracked velocities). Turn
+signals: highway-env's vehicles do not signal, but each follows a route, and with
+``observe_intentions`` the observation reports the direction to its end; the bridge turns that
+into the left or right signal a driver would show (``turn_signal``), and the core matches a
+signalling car to that movement on a shared approach. ``--no-turn-signals`` sends them all off.
 
 Baseline policies (``idle``, ``faster``, ``slower``) send that constant ``DiscreteMetaAction``
 (highway-env's default action space, which steers along the route) and do not need Concord.
@@ -172,7 +176,7 @@ POLICIES = ("concord",) + tuple(DISCRETE)
 # highway-env's kinematic model (vehicle/kinematics.py): length 5 m, slip angle
 # beta = atan(tan(delta) / 2), heading rate = v sin(beta) / (length / 2).
 VEHICLE_LENGTH = 5.0
-ACCEL_RANGE = (-8.0, 4.0)  # m/s²: Concord's emergency braking down to -8, its plans up to +3
+ACCEL_RANGE = (-8.0, 6.0)  # m/s²: Concord's emergency braking, up to the traffic's COMFORT_ACC_MAX
 STEERING_RANGE = (-math.pi / 3, math.pi / 3)  # MDPVehicle.MAX_STEERING_ANGLE
 OBSERVED = 33  # the ego and wire.MAX_AGENTS others
 
@@ -184,13 +188,15 @@ def env_config(policy, policy_frequency, spec=None):
         "observation": {
             "type": "Kinematics",
             "vehicles_count": OBSERVED,
-            "features": ["presence", "x", "y", "vx", "vy", "heading"],
+            # cos_d, sin_d: the direction to each vehicle's destination (highway-env's
+            # "intentions"), from which the bridge derives turn signals (see ``turn_signal``).
+            "features": ["presence", "x", "y", "vx", "vy", "heading", "cos_d", "sin_d"],
             "absolute": True,
             "normalize": False,
             "clip": False,
             "see_behind": True,
             "order": "sorted",
-            "observe_intentions": False,
+            "observe_intentions": True,
             # merge-v0's obstacle closing the auxiliary lane is part of the road, not traffic.
             "include_obstacles": False,
         },
@@ -262,15 +268,38 @@ class Tracker:
 
 
 def _state(a):
-    return [a.id, a.x, a.y, a.vx, a.vy, a.ax, a.ay, a.heading]
+    return [a.id, a.x, a.y, a.vx, a.vy, a.ax, a.ay, a.heading, a.turn_signal]
 
 
-def wire_agent(x, y, vx, vy, heading, agent_id, ax=0.0, ay=0.0):
+# Turn-signal codes of the wire (concord_wire / core TurnSignal).
+SIGNAL_OFF, SIGNAL_LEFT, SIGNAL_RIGHT = 0, 1, 2
+# A destination more than this far off the heading is a turn, rad (a car about to turn sees
+# its destination 40-65 degrees off; a car going straight, within a few degrees).
+SIGNAL_ANGLE_RAD = 0.35
+
+
+def turn_signal(heading, cos_d, sin_d):
+    """The turn signal a driver heading ``heading`` shows on the way to a destination in
+    direction (cos_d, sin_d): highway-env vehicles do not signal, but they know their route,
+    and its ``observe_intentions`` reports the direction to its end. highway-env's frame is
+    y-down, a mirror image, so a driver's left is a negative angle in its numbers."""
+    if cos_d == 0.0 and sin_d == 0.0:
+        return SIGNAL_OFF  # no route
+    angle = math.atan2(math.cos(heading) * sin_d - math.sin(heading) * cos_d,
+                       math.cos(heading) * cos_d + math.sin(heading) * sin_d)
+    if angle < -SIGNAL_ANGLE_RAD:
+        return SIGNAL_LEFT
+    if angle > SIGNAL_ANGLE_RAD:
+        return SIGNAL_RIGHT
+    return SIGNAL_OFF
+
+
+def wire_agent(x, y, vx, vy, heading, agent_id, ax=0.0, ay=0.0, signal=SIGNAL_OFF):
     a = wire.WireAgent()
     a.x, a.y, a.vx, a.vy, a.ax, a.ay = x, y, vx, vy, ax, ay
     a.heading = wrap(heading)
     a.intent = wire.WireIntent.unknown()
-    a.id, a.kind, a.turn_signal, a.valid = agent_id, 0, 0, 1
+    a.id, a.kind, a.turn_signal, a.valid = agent_id, 0, signal, 1
     return a
 
 
@@ -405,6 +434,7 @@ class ConcordPolicy:
         self.lookahead = args.lookahead
         self.timeout = args.timeout
         self.estimate_accel = args.estimate_accel
+        self.signals = not args.no_turn_signals
         self.tracker = Tracker()
         self.sequence = 0
         self.origin_ns = time.monotonic_ns()
@@ -431,7 +461,7 @@ class ConcordPolicy:
         f = wire.SceneFrame()
         f.sequence = self.sequence
         f.stamp_ns = self.origin_ns + int(round(sim_time * 1e9))
-        _, ex, ey, evx, evy, eh = (float(v) for v in ego)
+        _, ex, ey, evx, evy, eh = (float(v) for v in ego[:6])
         # highway-env reports velocity along the body heading, but its bicycle model moves the
         # centre of gravity along heading + slip, beta = atan(tan(steering) / 2). Reported as
         # is, a car in a steady turn would seem to drift outwards at v sin(beta) (1.7 m/s at
@@ -443,16 +473,17 @@ class ConcordPolicy:
         evx, evy = speed * math.cos(course), speed * math.sin(course)
         f.ego = wire_agent(ex, ey, evx, evy, eh, 0,
                            self.ego_accel * math.cos(course), self.ego_accel * math.sin(course))
-        ids = self.tracker.update([tuple(float(v) for v in r[1:]) for r in others], self.period)
+        ids = self.tracker.update([tuple(float(v) for v in r[1:6]) for r in others], self.period)
         for k, (r, (tid, prev)) in enumerate(zip(others, ids)):
-            _, x, y, vx, vy, h = (float(v) for v in r)
+            _, x, y, vx, vy, h, cos_d, sin_d = (float(v) for v in r)
+            signal = turn_signal(h, cos_d, sin_d) if self.signals else SIGNAL_OFF
             ax = ay = 0.0
             if self.estimate_accel and prev is not None:
                 ax, ay = (vx - prev[0]) / self.period, (vy - prev[1]) / self.period
                 norm = math.hypot(ax, ay)
                 if norm > 6.0:
                     ax, ay = ax * 6.0 / norm, ay * 6.0 / norm
-            f.agents[k] = wire_agent(x, y, vx, vy, h, tid, ax, ay)
+            f.agents[k] = wire_agent(x, y, vx, vy, h, tid, ax, ay, signal)
         f.ego_route_lane = self.route_lane
         return f, (ex, ey, eh, math.hypot(evx, evy))
 
@@ -485,9 +516,10 @@ class ConcordPolicy:
             "steer": round(steering, 3),
             "plan_v": [round(d.trajectory[k].speed, 2) for k in (0, 10, 20, 30, 40, 50)
                        if k < d.n_points],
-            "agents": [[a.id, round(a.x, 1), round(a.y, 1), round(math.hypot(a.vx, a.vy), 1)]
-                       for a in f.agents if a.valid],
-            # Exact scene, for replaying it through the core: [id, x, y, vx, vy, ax, ay, heading].
+            "agents": [[a.id, round(a.x, 1), round(a.y, 1), round(math.hypot(a.vx, a.vy), 1),
+                        a.turn_signal] for a in f.agents if a.valid],
+            # Exact scene, for replaying it through the core:
+            # [id, x, y, vx, vy, ax, ay, heading, turn signal].
             "scene": {"time": f.stamp_ns - self.origin_ns, "lane": f.ego_route_lane,
                       "ego": _state(f.ego),
                       "agents": [_state(a) for a in f.agents if a.valid]},
@@ -608,6 +640,9 @@ def main(argv=None):
                     help="seconds to wait for a decision before the episode fails")
     ap.add_argument("--estimate-accel", action="store_true",
                     help="send other vehicles' accelerations estimated from their tracks")
+    ap.add_argument("--no-turn-signals", action="store_true",
+                    help="send every vehicle with its turn signal off (default: derived from "
+                    "its destination, see turn_signal)")
     ap.add_argument("--keep-core", action="store_true",
                     help="one concord run for all seeds (default: a fresh core per seed)")
     ap.add_argument("--core-log", default=None, help="file for concord run's stderr")

@@ -68,6 +68,48 @@ class Following(unittest.TestCase):
         self.assertAlmostEqual(hb.intersection_progress(-36.0, -2.0), 100.0 + quarter + 25.0)
 
 
+class TurnSignals(unittest.TestCase):
+    """Signals derived from highway-env's destinations match the routes its vehicles follow."""
+
+    def test_directions_in_the_y_down_frame(self):
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+
+        # Heading east (+x); in highway-env's y-down frame north is -y, on the driver's left.
+        self.assertEqual(hb.turn_signal(0.0, 0.0, -1.0), hb.SIGNAL_LEFT)
+        self.assertEqual(hb.turn_signal(0.0, 0.0, 1.0), hb.SIGNAL_RIGHT)
+        self.assertEqual(hb.turn_signal(0.0, 1.0, 0.0), hb.SIGNAL_OFF)
+        self.assertEqual(hb.turn_signal(0.0, 0.0, 0.0), hb.SIGNAL_OFF)  # no route
+
+    def test_signals_match_intersection_v0_routes(self):
+        sys.path.insert(0, HERE)
+        import gymnasium as gym
+        import highway_env  # noqa: F401
+        import highway_bridge as hb
+
+        env = gym.make("intersection-v0", config=hb.env_config("concord", 5))
+        checked = 0
+        try:
+            for seed in range(5):
+                env.reset(seed=seed)
+                for v in env.unwrapped.road.vehicles[:-1]:  # the last one is the ego
+                    start, end, _ = v.lane_index
+                    if not (start.startswith("o") and end.startswith("ir")) or not v.route:
+                        continue
+                    if v.lane.local_coordinates(v.position)[0] > v.lane.length - 15.0:
+                        continue  # close to the junction the destination is no longer ahead
+                    k, m = int(start[1]), int(v.route[-1][1][1])
+                    expected = {(k + 2) % 4: hb.SIGNAL_OFF, (k + 1) % 4: hb.SIGNAL_LEFT,
+                                (k - 1) % 4: hb.SIGNAL_RIGHT}[m]
+                    d = v.destination_direction
+                    self.assertEqual(hb.turn_signal(v.heading, d[0], d[1]), expected,
+                                     f"seed {seed}: {v.lane_index} to o{m}")
+                    checked += 1
+        finally:
+            env.close()
+        self.assertGreater(checked, 10)
+
+
 class HighwayBridge(unittest.TestCase):
     def check_summary(self, stdout, result, policy, seeds, env="intersection-v0", top=20.0):
         last = stdout.strip().splitlines()[-1]

@@ -9,11 +9,15 @@ use libm::{atan2, cos, hypot, sin, sqrt};
 /// Most agents one scene carries (besides the ego).
 pub const MAX_AGENTS: usize = 32;
 /// Most lane reference lines in one morphology.
-pub const MAX_LANES: usize = 8;
+pub const MAX_LANES: usize = 12;
 /// Most vertices of one lane reference polyline.
 pub const MAX_LANE_POINTS: usize = 64;
 /// Most lane-pair conflict points in one morphology.
 pub const MAX_CONFLICTS: usize = 32;
+/// Extra lateral distance, m, at which lane matching counts a lane whose turn contradicts the
+/// agent's turn signal: where lanes overlap the signal decides, where they are apart the
+/// position does.
+pub const SIGNAL_MISMATCH_M: f64 = 1.0;
 /// Samples kept per agent history ring: 2 s at 10 Hz.
 pub const HISTORY_LEN: usize = 20;
 /// Spacing of history samples, s (10 Hz).
@@ -748,9 +752,11 @@ pub mod merge {
 /// exit (`il1 → o1`, y = −2, driving towards −x): the default `destination = "o1"`. Of the
 /// twelve movements, the six that cross or join that route are lanes here, plus the oncoming
 /// left turn (which passes the ego's turn without crossing it), so that an oncoming car in
-/// the middle of its turn is matched and predicted along its arc. On an approach shared by
-/// several movements, an agent matches the one with the lowest index, so straight movements
-/// come first.
+/// the middle of its turn is matched and predicted along its arc, and the right turns of the
+/// west and east approaches, so that a car signalling one is not taken for one that crosses.
+/// On an approach shared by several movements, an agent matches the movement its turn signal
+/// shows (see [`Morphology::match_lane`]); without a signal, the one with the lowest index,
+/// so straight movements come first.
 pub mod highway_env_intersection {
     /// Lane width, m (`AbstractLane.DEFAULT_WIDTH`).
     pub const LANE_WIDTH_M: f64 = 4.0;
@@ -781,8 +787,14 @@ pub mod highway_env_intersection {
     pub const EAST_STRAIGHT: u8 = 6;
     /// From the east, turning left to the south exit: crosses the turn.
     pub const EAST_LEFT: u8 = 7;
+    /// From the west, turning right to the south exit: shares the west approach, then turns
+    /// away from the ego's route (concentric with its turn, 4 m inside it).
+    pub const WEST_RIGHT: u8 = 8;
+    /// From the east, turning right to the north exit: shares the east approach, then turns
+    /// away from the ego's route.
+    pub const EAST_RIGHT: u8 = 9;
     /// Number of lanes.
-    pub const LANES: usize = 8;
+    pub const LANES: usize = 10;
 }
 
 /// Lane indices and dimensions of [`BuiltIn::HighwayEnvMerge`].
@@ -907,7 +919,10 @@ impl Morphology {
                 return Morphology::new(&[merge_main(), merge_ramp()])
                     .expect("built-in merge geometry is valid")
             }
-            BuiltIn::HighwayEnvIntersection => highway_env_intersection_lanes(),
+            BuiltIn::HighwayEnvIntersection => {
+                return Morphology::new(&highway_env_intersection_lanes())
+                    .expect("built-in highway-env intersection geometry is valid")
+            }
             BuiltIn::HighwayEnvMerge => {
                 return Morphology::new(&highway_env_merge_lanes())
                     .expect("built-in highway-env merge geometry is valid")
@@ -940,9 +955,23 @@ impl Morphology {
     }
 
     /// Lane that best explains an agent's pose: within the lane boundary and heading within
-    /// `max_heading_err` rad of the tangent; the smallest |l| wins. Returns (lane, Frenet).
-    pub fn match_lane(&self, pos: Vec2, dir: Vec2, max_heading_err: f64) -> Option<(u8, Frenet)> {
-        let mut best: Option<(u8, Frenet)> = None;
+    /// `max_heading_err` rad of the tangent; the smallest |l| wins, and a lane whose turn
+    /// contradicts a left or right `signal` counts as [`SIGNAL_MISMATCH_M`] further away (lanes
+    /// of one approach overlap until they diverge, so there the signal decides; without a
+    /// signal, or with hazard lights, the lowest index wins ties). Returns (lane, Frenet).
+    pub fn match_lane(
+        &self,
+        pos: Vec2,
+        dir: Vec2,
+        max_heading_err: f64,
+        signal: TurnSignal,
+    ) -> Option<(u8, Frenet)> {
+        let shown = match signal {
+            TurnSignal::Left => Some(Turn::Left),
+            TurnSignal::Right => Some(Turn::Right),
+            TurnSignal::Off | TurnSignal::Hazard => None,
+        };
+        let mut best: Option<(u8, Frenet, f64)> = None;
         for (i, lane) in self.lanes().iter().enumerate() {
             let f = lane.project(pos);
             if f.l.abs() > lane.half_width
@@ -956,11 +985,13 @@ impl Morphology {
             if err > max_heading_err {
                 continue;
             }
-            if best.is_none_or(|(_, b)| f.l.abs() < b.l.abs() - 1e-9) {
-                best = Some((i as u8, f));
+            let mismatch = shown.is_some_and(|turn| turn != lane.turn);
+            let cost = f.l.abs() + if mismatch { SIGNAL_MISMATCH_M } else { 0.0 };
+            if best.is_none_or(|(_, _, b)| cost < b - 1e-9) {
+                best = Some((i as u8, f, cost));
             }
         }
-        best
+        best.map(|(i, f, _)| (i, f))
     }
 }
 
@@ -1124,6 +1155,22 @@ fn highway_env_intersection_lanes() -> [Lane; highway_env_intersection::LANES] {
                 .line_to(v(-h, far)),
             Turn::Left,
         ),
+        // WEST_RIGHT: o1 → ir1 → il0 → o0.
+        lane(
+            Lane::builder(v(-far, h))
+                .line_to(v(-o, h))
+                .arc(v(-cr, cr), right, ARC_STEP_M)
+                .line_to(v(-h, far)),
+            Turn::Right,
+        ),
+        // EAST_RIGHT: o3 → ir3 → il2 → o2.
+        lane(
+            Lane::builder(v(far, -h))
+                .line_to(v(o, -h))
+                .arc(v(cr, -cr), right, ARC_STEP_M)
+                .line_to(v(h, -far)),
+            Turn::Right,
+        ),
     ]
 }
 
@@ -1213,7 +1260,7 @@ impl ProcessState {
         let speed = agent.speed();
         let dir = agent.direction();
         let a_mag = agent.acc.norm();
-        match morph.match_lane(agent.pos, dir, max_heading_err) {
+        match morph.match_lane(agent.pos, dir, max_heading_err, agent.turn_signal) {
             Some((lane_id, f)) => {
                 let lane = morph.lane(lane_id);
                 let t = Vec2::from_angle(f.tangent);

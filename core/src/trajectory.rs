@@ -653,6 +653,12 @@ impl Planner {
         // exceeds the lowest cap ahead) and the time to the goal distance. The lateral offset
         // is evaluated only where a box could be hit.
         let check_caps = v_peak > self.vcap_min + 1e-6;
+        // The lateral path must stay within the offset allowed for terminal states (or within
+        // the start's offset when the ego is already further out): a quintic that starts
+        // with lateral velocity can overshoot both ends, and replanning from the overshoot
+        // would let the ego drift out of its lane in a turn.
+        let lateral_moves = l.c[1..].iter().any(|c| *c != 0.0);
+        let l_bound = p.max_lateral_offset_m.max(fabs(st.l)) + 1e-6;
         let goal = st.s + self.goal_distance;
         let mut t_goal = f64::NAN;
         let (mut prev_t, mut prev_s) = (0.0, st.s);
@@ -677,8 +683,17 @@ impl Planner {
                     return Err(Reject::Limits);
                 }
             }
+            let lat = if on_poly && lateral_moves {
+                let lat = l.pos(t);
+                if fabs(lat) > l_bound {
+                    return Err(Reject::Limits);
+                }
+                Some(lat)
+            } else {
+                None
+            };
             if self.occupancy.may_hit(step, s) {
-                let lat = if on_poly { l.pos(t) } else { l_end };
+                let lat = lat.unwrap_or_else(|| if on_poly { l.pos(t) } else { l_end });
                 if self.occupancy.hits(step, s, lat) {
                     return Err(Reject::Collision);
                 }

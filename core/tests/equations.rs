@@ -335,6 +335,31 @@ fn table2_score_of_a_constant_speed_candidate() {
 }
 
 #[test]
+fn a_plan_started_with_lateral_velocity_stays_within_the_lateral_bound() {
+    // The ego's course is 0.15 rad off its lane (1.5 m/s sideways at 10 m/s): a quintic from
+    // that state overshoots any terminal offset unless its whole path is checked.
+    let p = Params::default();
+    let mut core =
+        concord_core::DecisionCore::new(p, Morphology::built_in(BuiltIn::PaperIntersection))
+            .unwrap();
+    let course = std::f64::consts::PI - 0.15;
+    let mut ego = AgentState::moving(0, Vec2::new(40.0, 5.0), course, 10.0);
+    ego.heading = std::f64::consts::PI;
+    let scene = concord_core::Scene::new(0.0, ego, paper::WEST_STRAIGHT);
+    let d = core.step(&scene, 0.0, None).unwrap();
+    assert_eq!(d.source, concord_core::DecisionSource::Logit, "{d:?}");
+    assert!(core.planner().start.dl.abs() > 1.0);
+    for pt in d.trajectory.points() {
+        assert!(
+            pt.l.abs() <= p.trajectory.max_lateral_offset_m + 1e-6,
+            "l = {} at t = {}",
+            pt.l,
+            pt.t
+        );
+    }
+}
+
+#[test]
 fn stale_scene_fallback_brakes_from_where_the_last_plan_puts_the_ego() {
     let mut core = paper_core(Params::default());
     assert!(

@@ -4,7 +4,7 @@
 
 use concord_core::scene::highway_env_intersection::*;
 use concord_core::scene::{
-    AgentState, BuiltIn, Morphology, Turn, Vec2, MAX_LANES, MAX_LANE_POINTS,
+    AgentState, BuiltIn, Morphology, Turn, TurnSignal, Vec2, MAX_LANES, MAX_LANE_POINTS,
 };
 use concord_core::{DecisionCore, Params};
 use std::f64::consts::{FRAC_PI_2, PI};
@@ -108,18 +108,22 @@ fn the_left_turn_conflicts_with_every_crossing_and_joining_lane() {
     assert!(s(NORTH_STRAIGHT) < s(WEST_LEFT));
     assert!(s(WEST_LEFT) < s(NORTH_RIGHT));
     assert!((s(NORTH_RIGHT) - s(EAST_STRAIGHT)).abs() < TOL);
-    // The oncoming left turn passes without crossing (the circles are 31 m apart, radii 13).
-    assert!(conflict_point(&m, EGO_LEFT, NORTH_LEFT).is_none());
+    // The oncoming left turn passes without crossing (the circles are 31 m apart, radii 13),
+    // and the right turns from the west and east turn away from it.
+    for lane in [NORTH_LEFT, WEST_RIGHT, EAST_RIGHT] {
+        assert!(conflict_point(&m, EGO_LEFT, lane).is_none(), "lane {lane}");
+    }
 }
 
 #[test]
 fn highway_env_poses_match_their_lanes() {
     let m = morph();
-    let at = |x: f64, y: f64, heading: f64| {
+    let signalling = |x: f64, y: f64, heading: f64, signal: TurnSignal| {
         let a = AgentState::moving(1, Vec2::new(x, y), heading, 8.0);
-        m.match_lane(a.pos, a.direction(), 1.0)
+        m.match_lane(a.pos, a.direction(), 1.0, signal)
             .map(|(lane, _)| lane)
     };
+    let at = |x: f64, y: f64, heading: f64| signalling(x, y, heading, TurnSignal::Off);
     // intersection-v0's ego spawn: (2, ~39), heading −π/2 (towards −y).
     assert_eq!(at(2.0, 39.3, -FRAC_PI_2), Some(EGO_LEFT));
     // Priority road from the west (heading 0) and from the east (heading π).
@@ -130,6 +134,25 @@ fn highway_env_poses_match_their_lanes() {
     let phase = PI - FRAC_PI_2 / 2.0;
     let (x, y) = (11.0 + 13.0 * phase.cos(), -11.0 + 13.0 * phase.sin());
     assert_eq!(at(x, y, FRAC_PI_2 / 2.0), Some(NORTH_LEFT));
+    // On a shared approach the turn signal picks the movement; hazard lights do not.
+    let west = |signal| signalling(-42.0, 2.0, 0.0, signal);
+    assert_eq!(west(TurnSignal::Left), Some(WEST_LEFT));
+    assert_eq!(west(TurnSignal::Right), Some(WEST_RIGHT));
+    assert_eq!(west(TurnSignal::Hazard), Some(WEST_STRAIGHT));
+    assert_eq!(
+        signalling(45.9, -2.0, PI, TurnSignal::Right),
+        Some(EAST_RIGHT)
+    );
+    assert_eq!(
+        signalling(-2.0, -47.9, FRAC_PI_2, TurnSignal::Right),
+        Some(NORTH_RIGHT)
+    );
+    // Once the lanes have diverged, position outweighs a contradicting signal: 6 m into the
+    // junction the west left turn is 1.5 m off a car still on the straight line.
+    assert_eq!(
+        signalling(-5.0, 2.0, 0.0, TurnSignal::Left),
+        Some(WEST_STRAIGHT)
+    );
 }
 
 #[test]
@@ -239,7 +262,7 @@ mod merge {
         let m = morph();
         let at = |x: f64, y: f64, heading: f64| {
             let a = AgentState::moving(1, Vec2::new(x, y), heading, 25.0);
-            m.match_lane(a.pos, a.direction(), 1.0)
+            m.match_lane(a.pos, a.direction(), 1.0, a.turn_signal)
                 .map(|(lane, _)| lane)
         };
         // merge-v0's ego spawn: ("a", "b", 1) at 30 m, heading 0.
