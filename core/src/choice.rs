@@ -132,6 +132,9 @@ pub struct EgoContext {
     pub max_duration: f64,
 }
 
+/// Below this speed the ego counts as stopped for the idle penalty, m/s.
+const IDLE_SPEED_MPS: f64 = 0.1;
+
 /// Nominal profile of maneuver `m`.
 pub fn profile(m: Maneuver, ctx: &EgoContext, p: &ChoiceParams) -> Profile {
     let v0 = ctx.speed;
@@ -455,6 +458,10 @@ pub fn choose(
     let a_idm = triplet
         .leader
         .map(|l| idm_accel(ctx.speed, l.gap_m, ctx.speed - l.speed_mps, p));
+    // Stopped, yielding to nothing, and free to move off (no leader, or one IDM would follow).
+    let idle = ctx.speed < IDLE_SPEED_MPS
+        && ctx.yield_distance.is_infinite()
+        && a_idm.is_none_or(|a| a > 0.0);
     for m in Maneuver::ALL {
         let i = m.index();
         let prof = profile(m, ctx, p);
@@ -466,6 +473,9 @@ pub fn choose(
         }
         if !m.consistent_with(ctx.route) {
             matching -= p.navigation_penalty;
+        }
+        if idle && prof.target_speed < IDLE_SPEED_MPS {
+            matching -= p.idle_penalty;
         }
         let safety = safety_degree(&prof, ctx.speed, conflicts.pairs(), opm);
         out.safety[i] = safety;

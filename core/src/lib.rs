@@ -251,6 +251,15 @@ impl DecisionCore {
             &self.morph,
             &p.trajectory,
         );
+        // The yield point stops `before` the conflict point; the zone is cleared once the
+        // whole car is past it.
+        self.planner.yield_distance = ctx.yield_distance;
+        self.planner.clear_distance = ctx.yield_distance
+            + p.opm.conflict_zone_half_m
+            + p.trajectory.stop_margin_m
+            + 0.5 * p.trajectory.vehicle_length_m
+            + p.opm.conflict_zone_half_m
+            + p.trajectory.vehicle_length_m;
 
         let mut decision = Decision {
             cycle: self.cycle,
@@ -316,6 +325,25 @@ impl DecisionCore {
                     &p.trajectory,
                     &mut decision.trajectory,
                 );
+                // Braking where the ego stands can be the worst choice inside a junction, in
+                // the path of crossing traffic. When braking is predicted to be hit too, the
+                // dynamically feasible plan holding or gaining speed that postpones the first
+                // predicted contact longest is taken instead, if it does: it leaves the
+                // others the most time to react.
+                if let Some(mut latest) = self.planner.first_contact(&decision.trajectory) {
+                    let n = p.trajectory.samples;
+                    for m in [Maneuver::KeepSpeed, Maneuver::Accelerate] {
+                        let profile = &self.choice.profiles[m.index()];
+                        self.planner.sample(profile, n, self.cycle, &p.trajectory);
+                        if let Some((c, t)) = self.planner.latest_contact(n, &p.trajectory) {
+                            if t > latest {
+                                latest = t;
+                                decision.maneuver = m;
+                                self.planner.render(&c, &lane, &mut decision.trajectory);
+                            }
+                        }
+                    }
+                }
             }
         }
         self.choices

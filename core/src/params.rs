@@ -78,6 +78,11 @@ pub struct ChoiceParams {
     pub lambda: f64,
     /// Penalty on a turn against the navigation instruction (matching degree).
     pub navigation_penalty: f64,
+    /// Penalty on waiting without a reason (matching degree): a maneuver that keeps a stopped
+    /// ego standing when it yields to nothing and no leader holds it back. Without it the
+    /// history terms of eq. 12–14 can keep a stopped ego in "decelerate" once the last
+    /// conflict is gone, since its scene state, and so D_prev, no longer changes.
+    pub idle_penalty: f64,
     /// Gain of the IDM car-following penalty, per m/s² of excess acceleration.
     pub idm_penalty_gain: f64,
     /// Nominal acceleration of "accelerate", m/s².
@@ -125,6 +130,7 @@ impl Default for ChoiceParams {
             gamma: 0.5,
             lambda: 0.5,
             navigation_penalty: 5.0,
+            idle_penalty: 1.0,
             idm_penalty_gain: 1.0,
             accelerate_mps2: 1.5,
             decelerate_mps2: 2.0,

@@ -405,6 +405,13 @@ pub struct Planner {
     vcap_from_s: f64,
     /// Distance whose traversal time is T_n of S_k, m.
     pub goal_distance: f64,
+    /// Distance to the yield point, m, and past which the ego has cleared the conflict zone
+    /// it yields at, m (both ∞ when it yields at none).
+    pub yield_distance: f64,
+    pub clear_distance: f64,
+    /// The sampled profile yields: candidates that do not stop must end the horizon past
+    /// `clear_distance` or able to stop before `yield_distance`.
+    yielding: bool,
     steps: usize,
     dt: f64,
     // Monte Carlo terminal states, structure of arrays.
@@ -424,6 +431,9 @@ impl Default for Planner {
             vcap_min: 0.0,
             vcap_from_s: f64::INFINITY,
             goal_distance: 50.0,
+            yield_distance: f64::INFINITY,
+            clear_distance: f64::INFINITY,
+            yielding: false,
             steps: 0,
             dt: 0.1,
             end_t: [0.0; MAX_SAMPLES],
@@ -576,25 +586,42 @@ impl Planner {
     /// Draws `n` terminal states around `nominal` (eq. 23): T and v_T are scaled by
     /// (1 + σ·z), l_T = σ_l·z (its nominal is 0), z ~ 𝒩(0, 1) clipped to ±`sigma_clip`.
     /// Sample 0 is the nominal itself.
+    ///
+    /// A yielding profile stops at the yield point, and a zero v_T cannot be perturbed by
+    /// scaling. Its odd samples instead reach the yield point at v_T ~ U(0, v₀) and roll on
+    /// (T = 2d / (v₀ + v_T), perturbed the same way): they pass behind a crossing car without
+    /// stopping, and `evaluate` keeps them only when they also clear the conflict zone within
+    /// the checked horizon or can still stop before it at its end.
     pub fn sample(&mut self, nominal: &Profile, n: usize, cycle: u64, p: &TrajectoryParams) {
         let n = n.clamp(1, MAX_SAMPLES);
         let mut rng = SmallRng::seed_from_u64(p.seed ^ cycle.wrapping_mul(0x9E37_79B9_7F4A_7C15));
         let clip = p.sigma_clip;
-        let mut z = || -> f64 {
+        let z = |rng: &mut SmallRng| -> f64 {
             let v: f64 = rng.sample(StandardNormal);
             v.clamp(-clip, clip)
         };
-        let v_top = p.max_speed_mps.max(self.start.ds);
+        let v0 = self.start.ds.max(0.0);
+        let v_top = p.max_speed_mps.max(v0);
         let low_speed = self.start.ds < p.low_speed_mps;
+        self.yielding = nominal.yields && !low_speed;
         for k in 0..n {
             let (zt, zv, zl) = if k == 0 {
                 (0.0, 0.0, 0.0)
             } else {
-                (z(), z(), z())
+                (z(&mut rng), z(&mut rng), z(&mut rng))
             };
-            self.end_t[k] = (nominal.duration * (1.0 + p.sigma_rel * zt))
-                .clamp(p.min_duration_s, p.max_duration_s);
-            self.end_v[k] = (nominal.target_speed * (1.0 + p.sigma_rel * zv)).clamp(0.0, v_top);
+            let (duration, target) = if self.yielding && k % 2 == 1 {
+                let v_end = v0 * rng.random::<f64>();
+                (nominal.duration * v0 / (v0 + v_end), v_end)
+            } else {
+                (
+                    nominal.duration,
+                    nominal.target_speed * (1.0 + p.sigma_rel * zv),
+                )
+            };
+            self.end_t[k] =
+                (duration * (1.0 + p.sigma_rel * zt)).clamp(p.min_duration_s, p.max_duration_s);
+            self.end_v[k] = target.clamp(0.0, v_top);
             // Below the low-speed threshold, at either end, the offset is held: a time-based
             // lateral polynomial would need unbounded path curvature near standstill.
             self.end_l[k] = if low_speed || self.end_v[k] < p.low_speed_mps {
@@ -624,10 +651,71 @@ impl Planner {
                     }
                 }
                 Err(Reject::Limits) => stats.limit_rejects += 1,
-                Err(Reject::Collision) => stats.collision_rejects += 1,
+                Err(Reject::Collision(_) | Reject::Commits) => stats.collision_rejects += 1,
             }
         }
         best
+    }
+
+    /// The longitudinal quartic and lateral quintic from the start state to terminal time
+    /// `t_end`, speed `v_end` and offset `l_end` (eq. 19–22; the offset is held below the
+    /// low-speed threshold).
+    fn polynomials(
+        &self,
+        t_end: f64,
+        v_end: f64,
+        l_end: f64,
+        p: &TrajectoryParams,
+    ) -> (Quartic, Quintic) {
+        let st = &self.start;
+        let q = Quartic::fit(st.s, st.ds, st.dds, v_end, 0.0, t_end);
+        let l = if l_end == st.l && (st.ds < p.low_speed_mps || v_end < p.low_speed_mps) {
+            Quintic {
+                c: [st.l, 0.0, 0.0, 0.0, 0.0, 0.0],
+            }
+        } else {
+            Quintic::fit(st.l, st.dl, st.ddl, l_end, 0.0, 0.0, t_end)
+        };
+        (q, l)
+    }
+
+    /// Among the first `n` sampled candidates that respect every limit, the one whose first
+    /// predicted contact is latest, with that time (s; `None` when every candidate breaks a
+    /// limit). For when no candidate is free of contact: see [`Planner::first_contact`].
+    pub fn latest_contact(&self, n: usize, p: &TrajectoryParams) -> Option<(Candidate, f64)> {
+        let mut latest: Option<(Candidate, f64)> = None;
+        for k in 0..n.clamp(1, MAX_SAMPLES) {
+            let (t_end, v_end, l_end) = (self.end_t[k], self.end_v[k], self.end_l[k]);
+            let contact = match self.evaluate(t_end, v_end, l_end, p) {
+                Ok(c) => return Some((c, f64::INFINITY)),
+                Err(Reject::Collision(t)) => t,
+                Err(Reject::Limits | Reject::Commits) => continue,
+            };
+            if latest.is_none_or(|(_, t)| contact > t) {
+                let (s, l) = self.polynomials(t_end, v_end, l_end, p);
+                let c = Candidate {
+                    s,
+                    l,
+                    duration: t_end,
+                    score: f64::INFINITY,
+                };
+                latest = Some((c, contact));
+            }
+        }
+        latest
+    }
+
+    /// Time of the first predicted contact along a rendered trajectory, s (`None`: none
+    /// within the horizon).
+    pub fn first_contact(&self, trajectory: &Trajectory) -> Option<f64> {
+        trajectory
+            .points()
+            .iter()
+            .skip(1)
+            .take(self.steps)
+            .enumerate()
+            .find(|(step, q)| self.occupancy.hits(*step, q.s, q.l))
+            .map(|(_, q)| q.t)
     }
 
     /// Evaluates one candidate with terminal time `t_end`, speed `v_end` and offset `l_end`.
@@ -639,14 +727,7 @@ impl Planner {
         p: &TrajectoryParams,
     ) -> Result<Candidate, Reject> {
         let st = &self.start;
-        let q = Quartic::fit(st.s, st.ds, st.dds, v_end, 0.0, t_end);
-        let l = if l_end == st.l && (st.ds < p.low_speed_mps || v_end < p.low_speed_mps) {
-            Quintic {
-                c: [st.l, 0.0, 0.0, 0.0, 0.0, 0.0],
-            }
-        } else {
-            Quintic::fit(st.l, st.dl, st.ddl, l_end, 0.0, 0.0, t_end)
-        };
+        let (q, l) = self.polynomials(t_end, v_end, l_end, p);
         let (jerk_s, jerk_l, v_peak) = self.check_limits(&q, &l, t_end, p)?;
 
         // Time grid: collisions, curvature speed caps (only when the candidate's peak speed
@@ -695,7 +776,7 @@ impl Planner {
             if self.occupancy.may_hit(step, s) {
                 let lat = lat.unwrap_or_else(|| if on_poly { l.pos(t) } else { l_end });
                 if self.occupancy.hits(step, s, lat) {
-                    return Err(Reject::Collision);
+                    return Err(Reject::Collision(t));
                 }
             }
             if t_goal.is_nan() && s >= goal {
@@ -705,6 +786,20 @@ impl Planner {
             prev_s = s;
         }
         let horizon = self.steps as f64 * self.dt;
+        // A yielding candidate that does not stop must end the horizon either through the
+        // conflict zone it yields at, or still able to stop before it (a quartic stop peaks
+        // at 1.5 × its mean deceleration); otherwise the next car could find it inside.
+        if self.yielding && v_end > 0.0 && prev_s < st.s + self.clear_distance {
+            let v_h = if horizon <= t_end {
+                q.vel(horizon)
+            } else {
+                v_end
+            };
+            let stopping = v_h * v_h / (2.0 * p.max_brake_mps2 / 1.5);
+            if prev_s + stopping > st.s + self.yield_distance {
+                return Err(Reject::Commits);
+            }
+        }
         let t_n = if t_goal.is_nan() {
             let v_last = if horizon <= t_end {
                 q.vel(horizon)
@@ -872,8 +967,13 @@ impl Planner {
 }
 
 /// Why a candidate failed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Reject {
+    /// Speed, acceleration, jerk, curvature or lateral limits.
     Limits,
-    Collision,
+    /// A predicted contact this many seconds ahead.
+    Collision(f64),
+    /// A yielding candidate that neither clears the conflict zone within the horizon nor can
+    /// still stop before it (counted with collisions).
+    Commits,
 }

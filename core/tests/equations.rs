@@ -359,6 +359,123 @@ fn a_plan_started_with_lateral_velocity_stays_within_the_lateral_bound() {
     }
 }
 
+/// The CAV 30 m before its crossing with the HDV's lane at 10 m/s, the HDV `hdv_before` m
+/// before the same point at 10 m/s; returns the core after one step and the best
+/// "decelerate" candidate with the CAV's distance to its yield point.
+fn decelerate_towards_the_crossing(
+    hdv_before: f64,
+) -> (
+    concord_core::DecisionCore,
+    concord_core::trajectory::Candidate,
+    f64,
+) {
+    let p = Params::default();
+    let mut core = paper_core(p);
+    let m = *core.morphology();
+    let (s_cav, s_hdv) = m
+        .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
+        .unwrap();
+    let at = |lane: u8, s: f64| {
+        let (pos, tangent, _) = m.lane(lane).pose_at(s, 0);
+        (pos, tangent)
+    };
+    let (cav, h_cav) = at(paper::CAV_LEFT, s_cav - 30.0);
+    let (hdv, h_hdv) = at(paper::HDV_STRAIGHT, s_hdv - hdv_before);
+    let mut scene = concord_core::Scene::new(
+        0.0,
+        AgentState::moving(0, cav, h_cav, 10.0),
+        paper::CAV_LEFT,
+    );
+    scene.push(AgentState::moving(1, hdv, h_hdv, 10.0));
+    core.step(&scene, 0.0, None).unwrap();
+    let profile = core.choice().profiles[Maneuver::Decelerate.index()];
+    assert!(profile.yields, "{profile:?}");
+    let mut planner = *core.planner();
+    planner.sample(&profile, p.trajectory.samples, 1, &p.trajectory);
+    let mut stats = concord_core::trajectory::PlanStats::default();
+    let best = planner
+        .run(p.trajectory.samples, &p.trajectory, &mut stats)
+        .expect("a feasible decelerate candidate");
+    (core, best, planner.yield_distance)
+}
+
+#[test]
+fn decelerating_behind_a_car_that_will_have_passed_rolls_on_instead_of_stopping() {
+    // The HDV is 3 m from the crossing: it is through long before the CAV arrives.
+    let (_, best, _) = decelerate_towards_the_crossing(3.0);
+    let v_end = best.s.vel(best.duration);
+    assert!(v_end > 1.0, "the best decelerate candidate stops: {best:?}");
+}
+
+#[test]
+fn a_rolling_decelerate_candidate_can_always_still_stop_before_the_zone() {
+    // The HDV arrives at the crossing when the CAV would at its speed: the CAV must not commit.
+    let p = Params::default().trajectory;
+    let (core, best, yield_distance) = decelerate_towards_the_crossing(30.0);
+    let start = core.planner().start;
+    let horizon = p.horizon_s;
+    let (s_h, v_h) = if horizon <= best.duration {
+        (best.s.pos(horizon), best.s.vel(horizon))
+    } else {
+        let v = best.s.vel(best.duration);
+        (best.s.pos(best.duration) + v * (horizon - best.duration), v)
+    };
+    let stopping = v_h * v_h / (2.0 * p.max_brake_mps2 / 1.5);
+    assert!(
+        s_h + stopping <= start.s + yield_distance + 1e-6,
+        "commits to the crossing: s {s_h:.1}, v {v_h:.1}, stop at {:.1}",
+        start.s + yield_distance
+    );
+}
+
+#[test]
+fn with_no_contact_free_plan_the_fallback_postpones_contact_at_least_as_long_as_braking() {
+    // The CAV inside the junction, just before its crossing with the HDV's lane, and the HDV
+    // arriving at every distance: whatever the fallback does, its first predicted contact
+    // comes no earlier than braking in place would, and in some of these scenes it drives on.
+    let p = Params::default();
+    let (mut fallbacks, mut drove_on) = (0, 0);
+    for cav_before in [0.0, 2.0, 4.0, 6.0] {
+        for hdv_before in (2..30).map(|d| d as f64) {
+            let mut core = paper_core(p);
+            let m = *core.morphology();
+            let (s_cav, s_hdv) = m
+                .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
+                .unwrap();
+            let (cav, h_cav, _) = m.lane(paper::CAV_LEFT).pose_at(s_cav - cav_before, 0);
+            let (hdv, h_hdv, _) = m.lane(paper::HDV_STRAIGHT).pose_at(s_hdv - hdv_before, 0);
+            let mut scene = concord_core::Scene::new(
+                0.0,
+                AgentState::moving(0, cav, h_cav, 6.0),
+                paper::CAV_LEFT,
+            );
+            scene.push(AgentState::moving(1, hdv, h_hdv, 10.0));
+            let d = core.step(&scene, 0.0, None).unwrap();
+            if d.source != concord_core::DecisionSource::MinimumRisk {
+                continue;
+            }
+            fallbacks += 1;
+            let lane = *core.morphology().lane(paper::CAV_LEFT);
+            let planner = *core.planner();
+            let mut braking = concord_core::Trajectory::default();
+            planner.minimum_risk(planner.yield_distance, &lane, &p.trajectory, &mut braking);
+            let t_brake = planner.first_contact(&braking).unwrap_or(f64::INFINITY);
+            let t_chosen = planner
+                .first_contact(&d.trajectory)
+                .unwrap_or(f64::INFINITY);
+            assert!(
+                t_chosen >= t_brake,
+                "CAV {cav_before} m, HDV {hdv_before} m: contact at {t_chosen} s, braking {t_brake} s"
+            );
+            drove_on += usize::from(d.maneuver != Maneuver::Decelerate);
+        }
+    }
+    assert!(
+        fallbacks > 0 && drove_on > 0,
+        "{fallbacks} fallbacks, {drove_on} drove on"
+    );
+}
+
 #[test]
 fn stale_scene_fallback_brakes_from_where_the_last_plan_puts_the_ego() {
     let mut core = paper_core(Params::default());
