@@ -251,15 +251,8 @@ impl DecisionCore {
             &self.morph,
             &p.trajectory,
         );
-        // The yield point stops `before` the conflict point; the zone is cleared once the
-        // whole car is past it.
         self.planner.yield_distance = ctx.yield_distance;
-        self.planner.clear_distance = ctx.yield_distance
-            + p.opm.conflict_zone_half_m
-            + p.trajectory.stop_margin_m
-            + 0.5 * p.trajectory.vehicle_length_m
-            + p.opm.conflict_zone_half_m
-            + p.trajectory.vehicle_length_m;
+        self.planner.clear_distance = ctx.yield_distance + stop_before_m(&p) + clear_past_m(&p);
 
         let mut decision = Decision {
             cycle: self.cycle,
@@ -414,9 +407,7 @@ impl DecisionCore {
     /// ahead, there is nothing to yield at (∞).
     fn yield_distance_from(&self, s: f64) -> f64 {
         let p = &self.params;
-        let before = p.opm.conflict_zone_half_m
-            + p.trajectory.stop_margin_m
-            + 0.5 * p.trajectory.vehicle_length_m;
+        let before = stop_before_m(p);
         let mut stop = self
             .conflicts
             .pairs()
@@ -459,7 +450,7 @@ impl DecisionCore {
             .conflicts
             .pairs()
             .iter()
-            .map(|c| c.ego_dist_m + p.opm.conflict_zone_half_m + p.trajectory.vehicle_length_m)
+            .map(|c| c.ego_dist_m + clear_past_m(p))
             .filter(|d| *d > 1.0)
             .fold(f64::INFINITY, f64::min);
         if exit.is_finite() {
@@ -468,6 +459,17 @@ impl DecisionCore {
             p.choice.reference_speed_mps * p.trajectory.t_ref_s
         }
     }
+}
+
+/// How far before a conflict point a yielding ego stops, m: half the conflict zone, the stop
+/// margin and half the car.
+fn stop_before_m(p: &Params) -> f64 {
+    p.opm.conflict_zone_half_m + p.trajectory.stop_margin_m + 0.5 * p.trajectory.vehicle_length_m
+}
+
+/// How far past a conflict point the ego has cleared its zone, m: half the zone and the car.
+fn clear_past_m(p: &Params) -> f64 {
+    p.opm.conflict_zone_half_m + p.trajectory.vehicle_length_m
 }
 
 /// Samples around `profile` and runs the Monte Carlo search.
