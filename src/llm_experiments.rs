@@ -69,6 +69,43 @@ impl LlmAdvisor {
     }
 }
 
+impl LlmAdvisor {
+    /// Asks for advice on `request` (with `history` for the Raw format) as the sidecar does:
+    /// the answer with its prompt tokens, and the call's latency, s (also when it failed).
+    fn ask(
+        &self,
+        format: PromptFormat,
+        steps: usize,
+        max_tokens: u32,
+        request: &AdviceRequest,
+        history: &[SceneFrame],
+    ) -> (Result<(AdviceAnswer, u32), String>, f64) {
+        let messages = concord_sidecar::prompt::advice_messages(
+            format,
+            steps,
+            self.cfg.advice.max_objects,
+            request,
+            history,
+            &[],
+            self.cfg.intent.max_text_chars,
+        );
+        let body = self
+            .client
+            .body(&messages, "advice", &advice_schema(steps), max_tokens);
+        let started = Instant::now();
+        let reply = self
+            .rt
+            .block_on(self.client.call(&body, started + Duration::from_secs(60)));
+        let latency = started.elapsed().as_secs_f64();
+        let answer = reply.map_err(|e| e.to_string()).and_then(|r| {
+            AdviceAnswer::decode(&r.answer)
+                .map(|a| (a, r.answer.usage.prompt_tokens))
+                .map_err(|e| e.to_string())
+        });
+        (answer, latency)
+    }
+}
+
 impl AdviceSource for LlmAdvisor {
     fn advise(
         &mut self,
@@ -85,31 +122,19 @@ impl AdviceSource for LlmAdvisor {
             core,
             w.ego.lane,
         );
-        let messages = concord_sidecar::prompt::advice_messages(
+        let advice = &self.cfg.advice;
+        let (answer, latency) = self.ask(
             PromptFormat::Opm,
-            self.cfg.advice.reasoning_steps,
-            self.cfg.advice.max_objects,
+            advice.reasoning_steps,
+            advice.max_tokens,
             &request,
             &[],
-            &[],
-            self.cfg.intent.max_text_chars,
         );
-        let body = self.client.body(
-            &messages,
-            "advice",
-            &advice_schema(self.cfg.advice.reasoning_steps),
-            self.cfg.advice.max_tokens,
-        );
-        let started = Instant::now();
-        let reply = self
-            .rt
-            .block_on(self.client.call(&body, started + Duration::from_secs(60)))
-            .ok()?;
-        let answer = AdviceAnswer::decode(&reply.answer).ok()?;
+        let (answer, _) = answer.ok()?;
         let confidence = answer
             .confidence
             .unwrap_or(self.cfg.llm.confidence_without_logprobs);
-        Some((answer.maneuver, confidence, started.elapsed().as_secs_f64()))
+        Some((answer.maneuver, confidence, latency))
     }
 }
 
@@ -182,12 +207,8 @@ fn scenes(n: usize, seed: u64) -> Vec<Labelled> {
 
 /// Runs the comparison against `url` and writes `prompts.csv` under `out`.
 pub fn run(url: &str, n: usize, seed: u64, out: &Path) -> Result<(), String> {
-    let LlmAdvisor {
-        client,
-        rt,
-        cfg,
-        model,
-    } = LlmAdvisor::new(url)?;
+    let advisor = LlmAdvisor::new(url)?;
+    let model = &advisor.model;
     let set = scenes(n, seed);
     let mut labels = [0usize; 5];
     for s in &set {
@@ -210,24 +231,9 @@ pub fn run(url: &str, n: usize, seed: u64, out: &Path) -> Result<(), String> {
         let mut latencies = Vec::new();
         for (i, s) in set.iter().enumerate() {
             eprint!("\r{} {}/{}   ", format.name(), i + 1, set.len());
-            let messages = concord_sidecar::prompt::advice_messages(
-                format,
-                STEPS,
-                cfg.advice.max_objects,
-                &s.request,
-                &s.history,
-                &[],
-                cfg.intent.max_text_chars,
-            );
-            let body = client.body(&messages, "advice", &advice_schema(STEPS), 160);
-            let started = Instant::now();
-            let result = rt.block_on(client.call(&body, started + Duration::from_secs(60)));
-            let ms = started.elapsed().as_secs_f64() * 1e3;
-            match result.map_err(|e| e.to_string()).and_then(|r| {
-                AdviceAnswer::decode(&r.answer)
-                    .map(|a| (a, r.answer.usage.prompt_tokens))
-                    .map_err(|e| e.to_string())
-            }) {
+            let (result, latency) = advisor.ask(format, STEPS, 160, &s.request, &s.history);
+            let ms = latency * 1e3;
+            match result {
                 Ok((a, t)) => {
                     answered += 1;
                     latencies.push(ms);

@@ -360,7 +360,7 @@ fn main() -> ExitCode {
                 llm,
                 llm_reps,
             } => llm
-                .map(|url| llm_experiments::LlmAdvisor::new(&url).map(|_| (url, llm_reps)))
+                .map(|url| llm_experiments::LlmAdvisor::new(&url).map(|a| (a, url, llm_reps)))
                 .transpose()
                 .and_then(|llm| {
                     experiment(
@@ -856,7 +856,7 @@ fn experiment(
     grid: Vec<concord_sim::experiment::Episode>,
     out: &Path,
     threads: Option<usize>,
-    llm: Option<(String, u32)>,
+    llm: Option<(llm_experiments::LlmAdvisor, String, u32)>,
 ) -> Result<(), String> {
     use concord_sim::experiment::{self as exp, ControllerKind};
     use concord_sim::world::ScenarioKind;
@@ -887,7 +887,7 @@ fn experiment(
     });
     eprintln!();
     let mut outcomes = outcomes;
-    if let Some((url, reps)) = llm {
+    if let Some((mut advisor, url, reps)) = llm {
         // The LLM runs: left turns, one at a time, the same starts as the grid's first reps.
         let episodes: Vec<_> = grid
             .iter()
@@ -915,8 +915,7 @@ fn experiment(
                 e.controller.name()
             );
             let _ = std::io::stderr().flush();
-            let advisor = llm_experiments::LlmAdvisor::new(&url)?;
-            outcomes.push(exp::run_episode_with(e, &params, Some(Box::new(advisor))));
+            outcomes.push(exp::run_episode_with(e, &params, Some(&mut advisor)));
         }
         eprintln!();
     }
@@ -961,15 +960,7 @@ fn experiment(
         }
     };
     for r in &rows {
-        let collisions = outcomes
-            .iter()
-            .filter(|o| {
-                o.episode.scenario == r.scenario
-                    && o.episode.controller == r.controller
-                    && o.episode.speed.round() == r.speed
-                    && o.metrics.collision
-            })
-            .count();
+        let collisions = (r.get("collision").0 * r.n as f64).round();
         println!(
             "| {} | {} | {:.0} | {} | {} | {:.0} % | {} | {} | {} | {} | {} |",
             r.scenario.name(),

@@ -140,7 +140,7 @@ def merge_arrived(env):
 # Per environment: the core's geometry and configuration file (under deploy/), the ego's route
 # lane, route progress and arrival, the top of ContinuousAction's speed range, the bridge's own
 # time limit (None: the environment's), how to build the environment (None: gym.make) and
-# configuration beyond the common one.
+# whether spawns are scaled to the policy frequency (see "Policy frequency" above).
 ENVS = {
     "intersection-v0": {
         "geometry": "highway-env-intersection",
@@ -152,7 +152,6 @@ ENVS = {
         "time_limit_s": None,
         "make": None,
         "scale_spawn": True,
-        "env_config": {},
     },
     "merge-v0": {
         "geometry": "highway-env-merge",
@@ -164,7 +163,6 @@ ENVS = {
         "time_limit_s": 40.0,
         "make": make_merge_env,
         "scale_spawn": False,
-        "env_config": {},
     },
 }
 
@@ -204,7 +202,6 @@ def env_config(policy, policy_frequency, spec=None):
     }
     if spec["scale_spawn"]:
         cfg["spawn_probability"] = 0.6 / policy_frequency
-    cfg.update(spec["env_config"])
     if policy == "concord":
         cfg["action"] = {
             "type": "ContinuousAction",
@@ -271,8 +268,9 @@ def _state(a):
     return [a.id, a.x, a.y, a.vx, a.vy, a.ax, a.ay, a.heading, a.turn_signal]
 
 
-# Turn-signal codes of the wire (concord_wire / core TurnSignal).
-SIGNAL_OFF, SIGNAL_LEFT, SIGNAL_RIGHT = 0, 1, 2
+# Turn-signal codes of the wire.
+SIGNAL_OFF, SIGNAL_LEFT, SIGNAL_RIGHT = (wire.TURN_SIGNALS.index(n)
+                                        for n in ("off", "left", "right"))
 # A destination more than this far off the heading is a turn, rad (a car about to turn sees
 # its destination 40-65 degrees off; a car going straight, within a few degrees).
 SIGNAL_ANGLE_RAD = 0.35

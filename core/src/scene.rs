@@ -913,22 +913,13 @@ impl Morphology {
 
     /// One of the built-in geometries.
     pub fn built_in(which: BuiltIn) -> Self {
-        let lanes = match which {
-            BuiltIn::PaperIntersection => paper_lanes(),
-            BuiltIn::Merge => {
-                return Morphology::new(&[merge_main(), merge_ramp()])
-                    .expect("built-in merge geometry is valid")
-            }
-            BuiltIn::HighwayEnvIntersection => {
-                return Morphology::new(&highway_env_intersection_lanes())
-                    .expect("built-in highway-env intersection geometry is valid")
-            }
-            BuiltIn::HighwayEnvMerge => {
-                return Morphology::new(&highway_env_merge_lanes())
-                    .expect("built-in highway-env merge geometry is valid")
-            }
-        };
-        Morphology::new(&lanes).expect("built-in intersection geometry is valid")
+        match which {
+            BuiltIn::PaperIntersection => Morphology::new(&paper_lanes()),
+            BuiltIn::Merge => Morphology::new(&[merge_main(), merge_ramp()]),
+            BuiltIn::HighwayEnvIntersection => Morphology::new(&highway_env_intersection_lanes()),
+            BuiltIn::HighwayEnvMerge => Morphology::new(&highway_env_merge_lanes()),
+        }
+        .expect("built-in geometries are valid")
     }
 
     pub fn lanes(&self) -> &[Lane] {
@@ -1180,8 +1171,7 @@ fn highway_env_merge_lanes() -> [Lane; highway_env_merge::LANES] {
     let v = Vec2::new;
     let hw = 0.5 * LANE_WIDTH_M;
     // Main lanes follow highway-env's nodes a → b → c → d. Their stop line is the join point
-    // (like BuiltIn::Merge's main lane); the ramp's is where its taper begins (the start of
-    // highway-env's auxiliary lane).
+    // (like BuiltIn::Merge's main lane).
     let main = |y: f64| {
         Lane::builder(v(0.0, y))
             .line_to(v(AUX_START_M, y))
@@ -1200,20 +1190,14 @@ fn highway_env_merge_lanes() -> [Lane; highway_env_merge::LANES] {
         let y = centre + amplitude * cos(PI * (x - SINE_START_M) / sine_len);
         ramp = ramp.line_to(v(x, y));
     }
-    let ramp = ramp
+    let mut ramp = ramp
         .line_to(v(JOIN_M, RIGHT_Y_M))
-        .line_to(v(ROAD_END_M, RIGHT_Y_M));
-    // Arc length of the ramp up to the start of the taper.
-    let built = ramp
+        .line_to(v(ROAD_END_M, RIGHT_Y_M))
         .build(hw, 0.0, Turn::Straight)
         .expect("valid built-in lane");
-    let taper_start = built.project(v(AUX_START_M, AUX_Y_M)).s;
-    [
-        main(RIGHT_Y_M),
-        main(LEFT_Y_M),
-        ramp.build(hw, taper_start, Turn::Straight)
-            .expect("valid built-in lane"),
-    ]
+    // The ramp's stop line is where its taper begins (the start of the auxiliary lane).
+    ramp.stop_s = ramp.project(v(AUX_START_M, AUX_Y_M)).s;
+    [main(RIGHT_Y_M), main(LEFT_Y_M), ramp]
 }
 
 fn merge_main() -> Lane {

@@ -731,8 +731,8 @@ impl Planner {
         let (jerk_s, jerk_l, v_peak) = self.check_limits(&q, &l, t_end, p)?;
 
         // Time grid: collisions, curvature speed caps (only when the candidate's peak speed
-        // exceeds the lowest cap ahead) and the time to the goal distance. The lateral offset
-        // is evaluated only where a box could be hit.
+        // exceeds the lowest cap ahead), the lateral bound and the time to the goal distance.
+        // A held lateral offset is evaluated only where a box could be hit.
         let check_caps = v_peak > self.vcap_min + 1e-6;
         // The lateral path must stay within the offset allowed for terminal states (or within
         // the start's offset when the ego is already further out): a quintic that starts

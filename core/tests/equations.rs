@@ -359,9 +359,30 @@ fn a_plan_started_with_lateral_velocity_stays_within_the_lateral_bound() {
     }
 }
 
-/// The CAV 30 m before its crossing with the HDV's lane at 10 m/s, the HDV `hdv_before` m
-/// before the same point at 10 m/s; returns the core after one step and the best
-/// "decelerate" candidate with the CAV's distance to its yield point.
+/// The paper's CAV `cav_before` m before its crossing with the HDV's lane at `cav_speed`
+/// m/s, and the HDV `hdv_before` m before the same point at 10 m/s.
+fn crossing_scene(
+    m: &Morphology,
+    cav_before: f64,
+    cav_speed: f64,
+    hdv_before: f64,
+) -> concord_core::Scene {
+    let (s_cav, s_hdv) = m
+        .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
+        .unwrap();
+    let (cav, h_cav, _) = m.lane(paper::CAV_LEFT).pose_at(s_cav - cav_before, 0);
+    let (hdv, h_hdv, _) = m.lane(paper::HDV_STRAIGHT).pose_at(s_hdv - hdv_before, 0);
+    let mut scene = concord_core::Scene::new(
+        0.0,
+        AgentState::moving(0, cav, h_cav, cav_speed),
+        paper::CAV_LEFT,
+    );
+    scene.push(AgentState::moving(1, hdv, h_hdv, 10.0));
+    scene
+}
+
+/// The CAV 30 m before the crossing at 10 m/s and the HDV `hdv_before` m before it: the core
+/// after one step, the best "decelerate" candidate and the CAV's distance to its yield point.
 fn decelerate_towards_the_crossing(
     hdv_before: f64,
 ) -> (
@@ -371,22 +392,7 @@ fn decelerate_towards_the_crossing(
 ) {
     let p = Params::default();
     let mut core = paper_core(p);
-    let m = *core.morphology();
-    let (s_cav, s_hdv) = m
-        .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
-        .unwrap();
-    let at = |lane: u8, s: f64| {
-        let (pos, tangent, _) = m.lane(lane).pose_at(s, 0);
-        (pos, tangent)
-    };
-    let (cav, h_cav) = at(paper::CAV_LEFT, s_cav - 30.0);
-    let (hdv, h_hdv) = at(paper::HDV_STRAIGHT, s_hdv - hdv_before);
-    let mut scene = concord_core::Scene::new(
-        0.0,
-        AgentState::moving(0, cav, h_cav, 10.0),
-        paper::CAV_LEFT,
-    );
-    scene.push(AgentState::moving(1, hdv, h_hdv, 10.0));
+    let scene = crossing_scene(core.morphology(), 30.0, 10.0, hdv_before);
     core.step(&scene, 0.0, None).unwrap();
     let profile = core.choice().profiles[Maneuver::Decelerate.index()];
     assert!(profile.yields, "{profile:?}");
@@ -438,18 +444,7 @@ fn with_no_contact_free_plan_the_fallback_postpones_contact_at_least_as_long_as_
     for cav_before in [0.0, 2.0, 4.0, 6.0] {
         for hdv_before in (2..30).map(|d| d as f64) {
             let mut core = paper_core(p);
-            let m = *core.morphology();
-            let (s_cav, s_hdv) = m
-                .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
-                .unwrap();
-            let (cav, h_cav, _) = m.lane(paper::CAV_LEFT).pose_at(s_cav - cav_before, 0);
-            let (hdv, h_hdv, _) = m.lane(paper::HDV_STRAIGHT).pose_at(s_hdv - hdv_before, 0);
-            let mut scene = concord_core::Scene::new(
-                0.0,
-                AgentState::moving(0, cav, h_cav, 6.0),
-                paper::CAV_LEFT,
-            );
-            scene.push(AgentState::moving(1, hdv, h_hdv, 10.0));
+            let scene = crossing_scene(core.morphology(), cav_before, 6.0, hdv_before);
             let d = core.step(&scene, 0.0, None).unwrap();
             if d.source != concord_core::DecisionSource::MinimumRisk {
                 continue;

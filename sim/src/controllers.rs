@@ -257,11 +257,7 @@ impl ConcordController {
             .sample(DT)
             .map_or(-3.0, |p| (p.speed - w.ego.v) / DT);
         let ehmi = speaks.then(|| {
-            if d.maneuver.gives_way() || d.source == DecisionSource::MinimumRisk {
-                Signal::Yield
-            } else {
-                Signal::Proceed
-            }
+            Signal::announcing(d.maneuver.gives_way() || d.source == DecisionSource::MinimumRisk)
         });
         Command { accel, ehmi }
     }
@@ -307,9 +303,9 @@ pub enum Timing {
 
 /// Concord with an external advisor asked every `period_s` of simulated time; the sidecar's
 /// eHMI speaks for the decision.
-pub struct ExternalAdvice {
+pub struct ExternalAdvice<'a> {
     inner: ConcordController,
-    source: Box<dyn AdviceSource>,
+    source: &'a mut dyn AdviceSource,
     timing: Timing,
     period_s: f64,
     next_ask_s: f64,
@@ -317,11 +313,11 @@ pub struct ExternalAdvice {
     held: Option<Advice>,
 }
 
-impl ExternalAdvice {
+impl<'a> ExternalAdvice<'a> {
     pub fn new(
         params: Params,
         w: &World,
-        source: Box<dyn AdviceSource>,
+        source: &'a mut dyn AdviceSource,
         timing: Timing,
         period_s: f64,
     ) -> Self {
@@ -342,7 +338,7 @@ impl ExternalAdvice {
     }
 }
 
-impl Controller for ExternalAdvice {
+impl Controller for ExternalAdvice<'_> {
     fn act(&mut self, w: &World, _: &HumanDriver) -> Command {
         if let Some(a) = self.pending.filter(|a| w.t + 1e-9 >= a.received_at_s) {
             self.held = Some(a);
@@ -415,11 +411,7 @@ pub fn best_maneuver(w: &World, hdv: &HumanDriver, ehmi: bool) -> Maneuver {
             continue;
         }
         let (mut world, mut driver) = (w.clone(), hdv.clone());
-        let signal = if m.gives_way() {
-            Signal::Yield
-        } else {
-            Signal::Proceed
-        };
+        let signal = Signal::announcing(m.gives_way());
         let mut closest = f64::INFINITY;
         for _ in 0..(8.0 / DT) as usize {
             let a_h = driver.act(&world, ehmi.then_some(signal));
@@ -489,13 +481,8 @@ mod tests {
 
     fn advice_decisions(timing: Timing, latency: f64) -> u64 {
         let mut w = World::new(ScenarioKind::LeftTurn, 8.0, 0.0);
-        let mut x = ExternalAdvice::new(
-            Params::default(),
-            &w,
-            Box::new(Constant(latency)),
-            timing,
-            1.0,
-        );
+        let mut source = Constant(latency);
+        let mut x = ExternalAdvice::new(Params::default(), &w, &mut source, timing, 1.0);
         let d = driver();
         for _ in 0..60 {
             let c = x.act(&w, &d);
@@ -526,11 +513,7 @@ mod tests {
         w.hdv.s = w.hdv_conflict_s - 18.0;
         let m = oracle(&w, &driver());
         let (mut world, mut d) = (w.clone(), driver());
-        let signal = if m.gives_way() {
-            Signal::Yield
-        } else {
-            Signal::Proceed
-        };
+        let signal = Signal::announcing(m.gives_way());
         for _ in 0..160 {
             let a = d.act(&world, Some(signal));
             world.step(rollout_accel(m, &world), a);

@@ -49,6 +49,17 @@ pub enum Signal {
     Proceed,
 }
 
+impl Signal {
+    /// The message of a CAV that gives way, or else goes first.
+    pub fn announcing(gives_way: bool) -> Signal {
+        if gives_way {
+            Signal::Yield
+        } else {
+            Signal::Proceed
+        }
+    }
+}
+
 /// One style's parameters (see the module table).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DriverParams {

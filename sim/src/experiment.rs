@@ -112,7 +112,7 @@ pub const ADVICE_PERIOD_S: f64 = 1.0;
 pub fn run_episode_with(
     e: &Episode,
     params: &Params,
-    source: Option<Box<dyn AdviceSource>>,
+    source: Option<&mut dyn AdviceSource>,
 ) -> Outcome {
     let mut w = World::new(e.scenario, e.speed, e.hdv_offset_m);
     let mut hdv = HumanDriver::new(e.style, e.speed, e.seed);
