@@ -13,11 +13,12 @@
 //!   HDV would simply hold its current acceleration (a human need not play the best
 //!   response), and pays `0.05 Δa²` for changing its acceleration. Ties go to the gentler
 //!   acceleration. Deterministic.
-//! * [`ConcordController`], the decision core's step (the same as `concord run`): logit-only
-//!   (no eHMI: the sidecar is what speaks), or with an [`Advisor`]: the oracle, which rolls
-//!   every route-consistent maneuver out for 8 s under a copy of the human driver (who hears
-//!   the matching eHMI message) and advises the fastest one without conflict, with confidence
-//!   1; the core's gate and safety veto still apply.
+//! * [`ConcordController`], the decision core's step (the same as `concord run`): logit-only,
+//!   or with an [`Advisor`]: the oracle, which rolls every route-consistent maneuver out for
+//!   8 s under a copy of the human driver (who hears the matching eHMI message) and advises the
+//!   fastest one without conflict, with confidence 1; the core's gate and safety veto still
+//!   apply. Both show the eHMI message of each decision (`ehmi_of`), as the onboard sidecar
+//!   announces every decision.
 //! * [`ExternalAdvice`]: Concord advised from outside the simulation (an LLM through the
 //!   sidecar's prompts, see `concord experiment paper --llm`), with simulated time either
 //!   waiting for each answer or letting it land after its measured latency.
@@ -240,9 +241,18 @@ impl ConcordController {
     }
 }
 
+/// The eHMI message that shows decision `d`: "please go ahead" when it gives way (or brakes
+/// as the minimum-risk fallback), else "I am going first". Every Concord controller speaks
+/// through this one function.
+fn ehmi_of(d: &Decision) -> Option<Signal> {
+    Some(Signal::announcing(
+        d.maneuver.gives_way() || d.source == DecisionSource::MinimumRisk,
+    ))
+}
+
 impl ConcordController {
-    /// One core step with `advice`, showing an eHMI message when `speaks`.
-    fn step_with(&mut self, w: &World, advice: Option<&Advice>, speaks: bool) -> Command {
+    /// One core step with `advice`; the eHMI shows the decision.
+    fn step_with(&mut self, w: &World, advice: Option<&Advice>) -> Command {
         let Ok(d) = self.core.step(&w.scene(), w.t, advice) else {
             return Command {
                 accel: -crate::world::MAX_BRAKE_MPS2,
@@ -256,10 +266,10 @@ impl ConcordController {
             .trajectory
             .sample(DT)
             .map_or(-3.0, |p| (p.speed - w.ego.v) / DT);
-        let ehmi = speaks.then(|| {
-            Signal::announcing(d.maneuver.gives_way() || d.source == DecisionSource::MinimumRisk)
-        });
-        Command { accel, ehmi }
+        Command {
+            accel,
+            ehmi: ehmi_of(&d),
+        }
     }
 }
 
@@ -274,8 +284,7 @@ impl Controller for ConcordController {
             }),
             _ => None,
         };
-        let speaks = self.advisor != Advisor::None;
-        self.step_with(w, advice.as_ref(), speaks)
+        self.step_with(w, advice.as_ref())
     }
 }
 
@@ -367,7 +376,7 @@ impl Controller for ExternalAdvice<'_> {
             }
         }
         let held = self.held;
-        self.inner.step_with(w, held.as_ref(), true)
+        self.inner.step_with(w, held.as_ref())
     }
 }
 
@@ -504,6 +513,18 @@ mod tests {
             0,
             "after the 1.5 s deadline"
         );
+    }
+
+    #[test]
+    fn every_concord_controller_shows_its_decision_on_the_ehmi() {
+        let w = World::new(ScenarioKind::LeftTurn, 8.0, 0.0);
+        for advisor in [Advisor::None, Advisor::Oracle] {
+            let mut c = ConcordController::new(Params::default(), &w, advisor);
+            let cmd = c.act(&w, &driver());
+            let d = c.last.expect("decided");
+            assert_eq!(cmd.ehmi, ehmi_of(&d), "{advisor:?}");
+            assert!(cmd.ehmi.is_some());
+        }
     }
 
     #[test]
