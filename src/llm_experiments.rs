@@ -19,7 +19,6 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use concord_core::scene::Style;
 use concord_core::Params;
 use concord_ipc::wire::{AdviceRequest, SceneFrame};
 use concord_sidecar::config::{LlmConfig, PromptFormat, SidecarConfig};
@@ -28,7 +27,7 @@ use concord_sidecar::schema::{advice_schema, AdviceAnswer};
 use concord_sim::controllers::{
     best_maneuver, AdviceSource, Advisor, ConcordController, Controller,
 };
-use concord_sim::driver::HumanDriver;
+use concord_sim::driver::{DriverStyle, HumanDriver};
 use concord_sim::world::{ScenarioKind, World, DT};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
@@ -153,11 +152,10 @@ fn scenes(n: usize, seed: u64) -> Vec<Labelled> {
     let params = Params::default();
     let mut out = Vec::new();
     while out.len() < n {
-        let style =
-            [Style::Aggressive, Style::Balanced, Style::Conservative][rng.random_range(0..3)];
+        let style = DriverStyle::DECISIVE[rng.random_range(0..DriverStyle::DECISIVE.len())];
         let speed = rng.random_range(5.0..11.0);
         let mut w = World::new(ScenarioKind::LeftTurn, speed, rng.random_range(-15.0..15.0));
-        let mut hdv = HumanDriver::new(style, speed, rng.random());
+        let mut hdv = [HumanDriver::new(style, speed, rng.random())];
         let mut cav = ConcordController::new(params, &w, Advisor::None);
         let stop_at = rng.random_range(0.5..4.0);
         let mut history: Vec<SceneFrame> = Vec::new();
@@ -170,12 +168,13 @@ fn scenes(n: usize, seed: u64) -> Vec<Labelled> {
                 &w.scene(),
             ));
             seq += 1;
-            let a_h = hdv.act(&w, cmd.ehmi);
-            w.step(cmd.accel, a_h);
+            let a_h = hdv[0].act(&w, 0, cmd.ehmi).accel;
+            w.step(cmd.accel, &[a_h]);
         }
-        let (ego_d, hdv_d) = w.to_conflict();
+        let (ego_d, hdv_d) = w.to_conflict(0);
+        let zone = w.hdvs[0].zone_half_m;
         let Some(decision) = cav.last else { continue };
-        if ego_d < w.zone_half_m || hdv_d < -w.zone_half_m {
+        if ego_d < zone || hdv_d < -zone {
             continue;
         }
         let core = cav.core();

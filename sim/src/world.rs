@@ -1,7 +1,9 @@
-//! The kinematic world of one episode: the CAV (ego) and one human-driven vehicle (HDV), each
-//! bound to a lane of the core's morphology, integrated at [`DT`] (20 Hz). Geometry and the
-//! conflict zone come from [`Morphology`]: the conflict point of the two lanes, and a zone of
-//! ±[`ZONE_HALF_M`] along each lane around it.
+//! The kinematic world of one episode: the CAV (ego) and a list of human-driven vehicles
+//! (HDVs), each bound to a lane of the core's morphology, integrated at [`DT`] (20 Hz).
+//! Geometry and the conflict zones come from [`Morphology`]: each HDV has the conflict point
+//! of its lane with the ego's (`Morphology::conflict_between`) and a zone of ±`zone_half_m`
+//! (at least [`ZONE_HALF_M`]) along both lanes around it. HDVs on one lane follow each other
+//! (the one ahead is the leader).
 
 use concord_core::scene::{merge, paper, AgentState, BuiltIn, Morphology, Scene, Vec2};
 
@@ -20,14 +22,21 @@ const CLEAR_LATERAL_M: f64 = CAR_WIDTH_M + 1.0;
 pub const MAX_BRAKE_MPS2: f64 = 8.0;
 pub const MAX_ACCEL_MPS2: f64 = 4.0;
 
-/// Which scenario.
+/// Which scenario. The discriminants seed the experiment grids: keep them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum ScenarioKind {
     /// The paper's unprotected left turn: CAV from (40, 5) turning left, HDV from (−40, −5)
-    /// straight on.
-    LeftTurn,
-    /// The on-ramp merge: CAV on the ramp, HDV on the main lane.
-    Merge,
+    /// straight on, on the priority road (the CAV turning across oncoming traffic gives way).
+    LeftTurn = 0,
+    /// The on-ramp merge: CAV on the ramp, HDV on the main lane (which has the right of way).
+    Merge = 1,
+    /// The same left turn with the right of way: the HDV comes from the minor road
+    /// (`paper::NORTH_STRAIGHT`, northbound at x = 5), as far from the conflict point as the
+    /// CAV, so both would reach it together at equal speeds.
+    LeftTurnPriority = 2,
+    /// The left turn across a stream of cars on `paper::HDV_STRAIGHT`, the first placed like
+    /// the paper's HDV, the others behind it (see [`World::with_followers`]).
+    Stream = 3,
 }
 
 impl ScenarioKind {
@@ -35,6 +44,8 @@ impl ScenarioKind {
         match self {
             ScenarioKind::LeftTurn => "left_turn",
             ScenarioKind::Merge => "merge",
+            ScenarioKind::LeftTurnPriority => "left_turn_priority",
+            ScenarioKind::Stream => "stream",
         }
     }
 }
@@ -52,6 +63,20 @@ pub struct Vehicle {
     pub a: f64,
 }
 
+/// One HDV and its conflict with the ego.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hdv {
+    pub car: Vehicle,
+    /// Arc lengths of the conflict point on the ego's lane and on the HDV's, m.
+    pub ego_conflict_s: f64,
+    pub conflict_s: f64,
+    /// Half-length of the conflict zone along each lane, m: at least [`ZONE_HALF_M`], and
+    /// before a merge as far back as the two lanes are closer than a car width and a margin.
+    pub zone_half_m: f64,
+    /// Whether it has the right of way over the CAV.
+    pub has_priority: bool,
+}
+
 /// The world of one episode.
 #[derive(Clone, Debug)]
 pub struct World {
@@ -60,35 +85,84 @@ pub struct World {
     /// Simulated time, s.
     pub t: f64,
     pub ego: Vehicle,
-    pub hdv: Vehicle,
-    /// Arc lengths of the conflict point on the ego's and the HDV's lane, m.
-    pub ego_conflict_s: f64,
-    pub hdv_conflict_s: f64,
-    /// Half-length of the conflict zone along each lane, m: at least [`ZONE_HALF_M`], and
-    /// before a merge as far back as the two lanes are closer than a car width and a margin.
-    pub zone_half_m: f64,
+    /// The HDVs, the scenario's first one first.
+    pub hdvs: Vec<Hdv>,
+}
+
+/// Corners of a car's footprint centred at `p` with heading `h` rad.
+pub fn footprint(p: Vec2, h: f64) -> [Vec2; 4] {
+    let f = Vec2::from_angle(h);
+    let l = Vec2::new(-f.y, f.x);
+    let (hl, hw) = (CAR_LENGTH_M / 2.0, CAR_WIDTH_M / 2.0);
+    [
+        p.plus(f.scale(hl)).plus(l.scale(hw)),
+        p.plus(f.scale(hl)).minus(l.scale(hw)),
+        p.minus(f.scale(hl)).plus(l.scale(hw)),
+        p.minus(f.scale(hl)).minus(l.scale(hw)),
+    ]
+}
+
+/// True when two footprints overlap (separating-axis test on oriented rectangles).
+fn overlap(a: &[Vec2; 4], b: &[Vec2; 4]) -> bool {
+    let axes = |c: &[Vec2; 4]| [c[0].minus(c[2]), c[0].minus(c[1])];
+    for axis in axes(a).into_iter().chain(axes(b)) {
+        let project = |c: &[Vec2; 4]| {
+            c.iter()
+                .map(|p| p.dot(axis))
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+                    (lo.min(x), hi.max(x))
+                })
+        };
+        let (a0, a1) = project(a);
+        let (b0, b1) = project(b);
+        if a1 < b0 || b1 < a0 {
+            return false;
+        }
+    }
+    true
 }
 
 impl World {
-    /// The scenario with both vehicles at `speed`, the HDV shifted `hdv_offset_m` along its lane
-    /// from the nominal start (positive: closer to the conflict).
+    /// The scenario with every vehicle at `speed` and one HDV, shifted `hdv_offset_m` along
+    /// its lane from the nominal start (positive: closer to the conflict).
     pub fn new(kind: ScenarioKind, speed: f64, hdv_offset_m: f64) -> World {
-        let (built_in, ego_lane, hdv_lane) = match kind {
-            ScenarioKind::LeftTurn => (
+        World::with_followers(kind, speed, hdv_offset_m, &[])
+    }
+
+    /// [`World::new`] with one more HDV on the first one's lane per entry of `headways_s`,
+    /// each that many seconds (front to front, at `speed`) behind the one before; followers
+    /// may start before the lane's first vertex (the lane is extended straight back).
+    pub fn with_followers(
+        kind: ScenarioKind,
+        speed: f64,
+        hdv_offset_m: f64,
+        headways_s: &[f64],
+    ) -> World {
+        let (built_in, ego_lane, hdv_lane, has_priority) = match kind {
+            ScenarioKind::LeftTurn | ScenarioKind::Stream => (
                 BuiltIn::PaperIntersection,
                 paper::CAV_LEFT,
                 paper::HDV_STRAIGHT,
+                true,
             ),
-            ScenarioKind::Merge => (BuiltIn::Merge, merge::RAMP, merge::MAIN),
+            ScenarioKind::LeftTurnPriority => (
+                BuiltIn::PaperIntersection,
+                paper::CAV_LEFT,
+                paper::NORTH_STRAIGHT,
+                false,
+            ),
+            ScenarioKind::Merge => (BuiltIn::Merge, merge::RAMP, merge::MAIN, true),
         };
         let morph = Morphology::built_in(built_in);
-        let (ego_conflict_s, hdv_conflict_s) = morph
+        let (ego_conflict_s, conflict_s) = morph
             .conflict_between(ego_lane, hdv_lane)
             .expect("the scenario's lanes conflict");
-        // Left turn: the paper's starts. Merge: both 60 m before the merge point.
+        // Left turns: the paper's starts (the minor-road HDV as far from the conflict point
+        // as the CAV). Merge: both 60 m before the merge point.
         let (ego_s, hdv_s) = match kind {
-            ScenarioKind::LeftTurn => (0.0, 0.0),
-            ScenarioKind::Merge => (ego_conflict_s - 60.0, hdv_conflict_s - 60.0),
+            ScenarioKind::LeftTurn | ScenarioKind::Stream => (0.0, 0.0),
+            ScenarioKind::LeftTurnPriority => (0.0, conflict_s - ego_conflict_s),
+            ScenarioKind::Merge => (ego_conflict_s - 60.0, conflict_s - 60.0),
         };
         // Walk back from the conflict point along each lane while the other lane is too close.
         let reach = |lane: u8, other: u8, s_c: f64| {
@@ -102,11 +176,9 @@ impl World {
             }
             back
         };
-        let zone_half_m = (reach(ego_lane, hdv_lane, ego_conflict_s).max(reach(
-            hdv_lane,
-            ego_lane,
-            hdv_conflict_s,
-        )) + CAR_LENGTH_M / 2.0)
+        let zone_half_m = (reach(ego_lane, hdv_lane, ego_conflict_s)
+            .max(reach(hdv_lane, ego_lane, conflict_s))
+            + CAR_LENGTH_M / 2.0)
             .max(ZONE_HALF_M);
         let vehicle = |id, lane, s| Vehicle {
             id,
@@ -115,15 +187,27 @@ impl World {
             v: speed,
             a: 0.0,
         };
+        let mut s = (hdv_s + hdv_offset_m).max(0.0);
+        let mut hdvs = Vec::with_capacity(1 + headways_s.len());
+        for (i, h) in std::iter::once(0.0)
+            .chain(headways_s.iter().copied())
+            .enumerate()
+        {
+            s -= h * speed;
+            hdvs.push(Hdv {
+                car: vehicle(i as u32 + 1, hdv_lane, s),
+                ego_conflict_s,
+                conflict_s,
+                zone_half_m,
+                has_priority,
+            });
+        }
         World {
             kind,
             morph,
             t: 0.0,
             ego: vehicle(0, ego_lane, ego_s),
-            hdv: vehicle(1, hdv_lane, (hdv_s + hdv_offset_m).max(0.0)),
-            ego_conflict_s,
-            hdv_conflict_s,
-            zone_half_m,
+            hdvs,
         }
     }
 
@@ -141,37 +225,79 @@ impl World {
         a
     }
 
-    /// The scene the core decides on.
+    /// The scene the core decides on: the ego and every HDV.
     pub fn scene(&self) -> Scene {
         let mut scene = Scene::new(self.t, self.agent(&self.ego), self.ego.lane);
-        scene.push(self.agent(&self.hdv));
+        for h in &self.hdvs {
+            scene.push(self.agent(&h.car));
+        }
         scene
     }
 
-    /// Distances of the ego's and the HDV's centres to the conflict point along their lanes, m
-    /// (negative once past it).
-    pub fn to_conflict(&self) -> (f64, f64) {
-        (
-            self.ego_conflict_s - self.ego.s,
-            self.hdv_conflict_s - self.hdv.s,
+    /// Distances of the ego's and HDV `i`'s centres to their conflict point along their lanes,
+    /// m (negative once past it).
+    pub fn to_conflict(&self, i: usize) -> (f64, f64) {
+        let h = &self.hdvs[i];
+        (h.ego_conflict_s - self.ego.s, h.conflict_s - h.car.s)
+    }
+
+    /// HDV `i`'s leader on its lane, the nearest HDV ahead: (bumper gap, m; its speed, m/s).
+    /// Infinite gap when none.
+    pub fn leader_of(&self, i: usize) -> (f64, f64) {
+        let me = &self.hdvs[i].car;
+        self.hdvs
+            .iter()
+            .map(|h| &h.car)
+            .filter(|o| o.id != me.id && o.lane == me.lane && o.s > me.s)
+            .map(|o| ((o.s - me.s - CAR_LENGTH_M).max(0.1), o.v))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .unwrap_or((f64::INFINITY, 0.0))
+    }
+
+    /// In the merge, the nearest HDV past the merge point and ahead of the CAV as its leader:
+    /// (bumper gap, m; its speed, m/s). Infinite gap otherwise.
+    pub fn ego_leader(&self) -> (f64, f64) {
+        if self.kind != ScenarioKind::Merge {
+            return (f64::INFINITY, 0.0);
+        }
+        (0..self.hdvs.len())
+            .filter_map(|i| {
+                let (ego_d, hdv_d) = self.to_conflict(i);
+                (hdv_d < 0.0 && hdv_d < ego_d)
+                    .then(|| ((ego_d - hdv_d - CAR_LENGTH_M).max(0.1), self.hdvs[i].car.v))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .unwrap_or((f64::INFINITY, 0.0))
+    }
+
+    /// True once the ego's centre is `beyond_m` past every HDV's conflict zone.
+    pub fn ego_past_zones(&self, beyond_m: f64) -> bool {
+        (0..self.hdvs.len()).all(|i| self.to_conflict(i).0 < -(self.hdvs[i].zone_half_m + beyond_m))
+    }
+
+    /// The junction: the bounding box (lower-left, upper-right corner) of every lane's stop
+    /// line, m. At the paper's intersection the box |x|, |y| ≤ 10; at the merge, the taper.
+    pub fn junction(&self) -> (Vec2, Vec2) {
+        self.morph.lanes().iter().fold(
+            (
+                Vec2::new(f64::INFINITY, f64::INFINITY),
+                Vec2::new(f64::NEG_INFINITY, f64::NEG_INFINITY),
+            ),
+            |(lo, hi), lane| {
+                let (p, _, _) = lane.to_cartesian(lane.stop_s, 0.0, 0);
+                (
+                    Vec2::new(lo.x.min(p.x), lo.y.min(p.y)),
+                    Vec2::new(hi.x.max(p.x), hi.y.max(p.y)),
+                )
+            },
         )
     }
 
-    /// In the merge, the HDV as the CAV's leader once it is past the merge point and ahead:
-    /// (bumper gap, m; its speed, m/s). Infinite gap otherwise.
-    pub fn ego_leader(&self) -> (f64, f64) {
-        let (ego_d, hdv_d) = self.to_conflict();
-        if self.kind == ScenarioKind::Merge && hdv_d < 0.0 && hdv_d < ego_d {
-            ((ego_d - hdv_d - CAR_LENGTH_M).max(0.1), self.hdv.v)
-        } else {
-            (f64::INFINITY, 0.0)
-        }
-    }
-
-    /// Advances both vehicles by [`DT`] with the given accelerations (clamped to what a car can
-    /// do; speeds never go negative).
-    pub fn step(&mut self, ego_accel: f64, hdv_accel: f64) {
-        for (v, a) in [(&mut self.ego, ego_accel), (&mut self.hdv, hdv_accel)] {
+    /// Advances every vehicle by [`DT`] with the given accelerations (the HDVs' in their
+    /// order; clamped to what a car can do; speeds never go negative).
+    pub fn step(&mut self, ego_accel: f64, hdv_accels: &[f64]) {
+        let cars = std::iter::once(&mut self.ego).chain(self.hdvs.iter_mut().map(|h| &mut h.car));
+        for (v, &a) in cars.zip(std::iter::once(&ego_accel).chain(hdv_accels)) {
             let a = if a.is_finite() { a } else { -MAX_BRAKE_MPS2 };
             let a = a.clamp(-MAX_BRAKE_MPS2, MAX_ACCEL_MPS2);
             let v1 = (v.v + a * DT).max(0.0);
@@ -182,41 +308,14 @@ impl World {
         self.t += DT;
     }
 
-    /// True when the two footprints overlap (separating-axis test on oriented rectangles).
+    /// True when the ego's footprint overlaps any HDV's.
     pub fn collided(&self) -> bool {
-        let corners = |v: &Vehicle| {
-            let (p, h) = self.pose(v);
-            let f = Vec2::from_angle(h);
-            let l = Vec2::new(-f.y, f.x);
-            let (hl, hw) = (CAR_LENGTH_M / 2.0, CAR_WIDTH_M / 2.0);
-            [
-                p.plus(f.scale(hl)).plus(l.scale(hw)),
-                p.plus(f.scale(hl)).minus(l.scale(hw)),
-                p.minus(f.scale(hl)).plus(l.scale(hw)),
-                p.minus(f.scale(hl)).minus(l.scale(hw)),
-            ]
-        };
-        let (a, b) = (corners(&self.ego), corners(&self.hdv));
-        let axes = |c: &[Vec2; 4]| {
-            let e1 = c[0].minus(c[2]);
-            let e2 = c[0].minus(c[1]);
-            [e1, e2]
-        };
-        for axis in axes(&a).into_iter().chain(axes(&b)) {
-            let project = |c: &[Vec2; 4]| {
-                c.iter()
-                    .map(|p| p.dot(axis))
-                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
-                        (lo.min(x), hi.max(x))
-                    })
-            };
-            let (a0, a1) = project(&a);
-            let (b0, b1) = project(&b);
-            if a1 < b0 || b1 < a0 {
-                return false;
-            }
-        }
-        true
+        let (p, h) = self.pose(&self.ego);
+        let ego = footprint(p, h);
+        self.hdvs.iter().any(|o| {
+            let (p, h) = self.pose(&o.car);
+            overlap(&ego, &footprint(p, h))
+        })
     }
 }
 
@@ -228,41 +327,79 @@ mod tests {
     fn the_paper_scenario_starts_where_the_paper_says() {
         let w = World::new(ScenarioKind::LeftTurn, 8.0, 0.0);
         let (e, _) = w.pose(&w.ego);
-        let (h, _) = w.pose(&w.hdv);
+        let (h, _) = w.pose(&w.hdvs[0].car);
         assert!((e.x - 40.0).abs() < 1e-6 && (e.y - 5.0).abs() < 1e-6);
         assert!((h.x + 40.0).abs() < 1e-6 && (h.y + 5.0).abs() < 1e-6);
-        assert!(w.ego_conflict_s > 30.0 && w.hdv_conflict_s > 30.0);
+        assert!(w.hdvs[0].ego_conflict_s > 30.0 && w.hdvs[0].conflict_s > 30.0);
+        assert!(w.hdvs[0].has_priority);
         assert!(!w.collided());
     }
 
     #[test]
     fn vehicles_at_the_conflict_point_collide() {
         let mut w = World::new(ScenarioKind::LeftTurn, 0.0, 0.0);
-        w.ego.s = w.ego_conflict_s;
-        w.hdv.s = w.hdv_conflict_s;
+        let h = w.hdvs[0];
+        w.ego.s = h.ego_conflict_s;
+        w.hdvs[0].car.s = h.conflict_s;
         assert!(w.collided());
-        w.hdv.s = w.hdv_conflict_s - ZONE_HALF_M;
+        w.hdvs[0].car.s = h.conflict_s - ZONE_HALF_M;
         assert!(!w.collided());
         assert!(
-            w.zone_half_m < 6.0,
+            h.zone_half_m < 6.0,
             "a right-angle crossing: {}",
-            w.zone_half_m
+            h.zone_half_m
         );
         let m = World::new(ScenarioKind::Merge, 0.0, 0.0);
-        assert!(m.zone_half_m > 10.0, "a shallow merge: {}", m.zone_half_m);
+        assert!(
+            m.hdvs[0].zone_half_m > 10.0,
+            "a shallow merge: {}",
+            m.hdvs[0].zone_half_m
+        );
     }
 
     #[test]
     fn integration_keeps_speed_non_negative_and_records_the_applied_acceleration() {
         let mut w = World::new(ScenarioKind::Merge, 1.0, 0.0);
-        w.step(-8.0, 2.0);
+        w.step(-8.0, &[2.0]);
         assert_eq!(w.ego.v, 0.6);
         assert!((w.ego.a + 8.0).abs() < 1e-9);
         for _ in 0..10 {
-            w.step(-8.0, 0.0);
+            w.step(-8.0, &[0.0]);
         }
         assert_eq!(w.ego.v, 0.0);
         assert_eq!(w.ego.a, 0.0);
-        assert!((w.hdv.v - 1.1).abs() < 1e-9);
+        assert!((w.hdvs[0].car.v - 1.1).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_minor_road_hdv_starts_as_far_from_the_conflict_as_the_cav() {
+        let w = World::new(ScenarioKind::LeftTurnPriority, 8.0, 0.0);
+        let (ego_d, hdv_d) = w.to_conflict(0);
+        assert!((ego_d - hdv_d).abs() < 1e-9, "{ego_d} {hdv_d}");
+        let (p, h) = w.pose(&w.hdvs[0].car);
+        assert!((p.x - 5.0).abs() < 1e-6 && p.y < -10.0, "{p:?}");
+        assert!((h - std::f64::consts::FRAC_PI_2).abs() < 1e-6, "northbound");
+        assert!(!w.hdvs[0].has_priority);
+        // The CAV crosses the northbound lane where its turn begins, (5, 5).
+        let (c, _, _) = w
+            .morph
+            .lane(w.ego.lane)
+            .to_cartesian(w.hdvs[0].ego_conflict_s, 0.0, 0);
+        assert!(c.minus(Vec2::new(5.0, 5.0)).norm() < 1e-6, "{c:?}");
+    }
+
+    #[test]
+    fn followers_queue_behind_the_first_hdv_and_follow_their_leader() {
+        let w = World::with_followers(ScenarioKind::Stream, 8.0, 0.0, &[2.0, 3.0]);
+        assert_eq!(w.hdvs.len(), 3);
+        let s: Vec<f64> = w.hdvs.iter().map(|h| h.car.s).collect();
+        assert_eq!(s, vec![0.0, -16.0, -40.0]);
+        assert!(w.hdvs.iter().all(|h| h.car.lane == paper::HDV_STRAIGHT));
+        assert_eq!(w.leader_of(0).0, f64::INFINITY);
+        assert_eq!(w.leader_of(1), (16.0 - CAR_LENGTH_M, 8.0));
+        assert_eq!(w.leader_of(2), (24.0 - CAR_LENGTH_M, 8.0));
+        assert_eq!(w.scene().n_agents, 3);
+        let (lo, hi) = w.junction();
+        assert_eq!((lo.x, lo.y, hi.x, hi.y), (-10.0, -10.0, 10.0, 10.0));
     }
 }

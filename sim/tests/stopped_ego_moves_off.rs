@@ -6,26 +6,25 @@
 //! on the eHMI: the driver does not see them (with them, a driver told "please go ahead"
 //! goes at once, and the ego no longer comes to this standstill).
 
-use concord_core::scene::Style;
 use concord_core::Params;
 use concord_sim::controllers::{Advisor, ConcordController, Controller};
-use concord_sim::driver::HumanDriver;
+use concord_sim::driver::{DriverStyle, HumanDriver};
 use concord_sim::world::{ScenarioKind, World};
 
 /// (the ego stopped at some point, it got 15 m past the zone without a collision in 40 s).
 fn replay(params: Params) -> (bool, bool) {
     let mut w = World::new(ScenarioKind::Merge, 10.0, -3.132);
-    let mut driver = HumanDriver::new(Style::Balanced, 10.0, 1_047_828);
+    let mut drivers = [HumanDriver::new(DriverStyle::Balanced, 10.0, 1_047_828)];
     let mut cav = ConcordController::new(params, &w, Advisor::None);
     let mut stopped = false;
     while w.t < 40.0 && !w.collided() {
-        if w.to_conflict().0 < -(w.zone_half_m + 15.0) {
+        if w.ego_past_zones(15.0) {
             return (stopped, true);
         }
         stopped |= w.ego.v < 0.01;
-        let cmd = cav.act(&w, &driver);
-        let a = driver.act(&w, None);
-        w.step(cmd.accel, a);
+        let cmd = cav.act(&w, &drivers);
+        let a = drivers[0].act(&w, 0, None).accel;
+        w.step(cmd.accel, &[a]);
     }
     (stopped, false)
 }
