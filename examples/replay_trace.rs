@@ -108,6 +108,26 @@ fn main() {
                 c.agent_ttc_s
             );
         }
+        if std::env::var_os("CONCORD_REPLAY_BOXES").is_some() {
+            let occ = &core.planner().occupancy;
+            for step in [0, 5, 10, 20, 30] {
+                let boxes: Vec<String> = occ
+                    .boxes(step)
+                    .map(|(s0, s1, l0, l1, m)| {
+                        format!(
+                            "s[{s0:.1},{s1:.1}] l[{l0:.1},{l1:.1}]{}",
+                            if m { " pet" } else { "" }
+                        )
+                    })
+                    .collect();
+                println!("   boxes at step {step}: {}", boxes.join("  "));
+            }
+            println!(
+                "   yields {:.2?} forecasts {:?}",
+                core.yields(),
+                &core.forecasts()[..scene.n_agents]
+            );
+        }
         for m in 0..MANEUVERS {
             let mut planner = *core.planner();
             let prof = ch.profiles[m];

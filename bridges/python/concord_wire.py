@@ -30,7 +30,10 @@ MANEUVERS = ("accelerate", "decelerate", "keep_speed", "turn_left", "turn_right"
 SOURCES = ("logit", "advice", "minimum_risk")
 FALLBACKS = ("none", "no_feasible_trajectory", "stale_scene")
 ADVICE_VERDICTS = ("no_advice", "accepted", "malformed", "unknown_request",
-                   "low_confidence", "late", "navigation_inconsistent", "unsafe")
+                   "low_confidence", "late", "navigation_inconsistent", "unsafe", "expired")
+# Announcement and negotiation Phase codes of a decision.
+ANNOUNCEMENTS = ("giving_way", "going_first")
+NEGOTIATION_PHASES = ("idle", "waiting", "announced", "going")
 # AgentKind, TurnSignal, Style, IntentAction, Task codes.
 AGENT_KINDS = ("car", "truck", "bus", "motorcycle", "bicycle", "pedestrian", "unknown")
 TURN_SIGNALS = ("off", "left", "right", "hazard")
@@ -132,7 +135,9 @@ class WireDecision(_Wire):
         ("source", ctypes.c_uint8),
         ("advice", ctypes.c_uint8),
         ("fallback", ctypes.c_uint8),
-        ("reserved", ctypes.c_uint8 * 3),
+        ("announce", ctypes.c_uint8),
+        ("negotiation", ctypes.c_uint8),
+        ("courtesy_rejects", ctypes.c_uint8),
     ]
 
 
@@ -161,9 +166,15 @@ class WireConflict(_Wire):
         ("ego_ttc_s", ctypes.c_double),
         ("agent_ttc_s", ctypes.c_double),
         ("delta_ttc_s", ctypes.c_double),
+        ("yielding", ctypes.c_float),
+        ("proceeding", ctypes.c_float),
+        ("undecided", ctypes.c_float),
+        ("required_decel_mps2", ctypes.c_float),
         ("agent_id", ctypes.c_uint32),
         ("risky", ctypes.c_uint8),
-        ("reserved", ctypes.c_uint8 * 3),
+        ("committed", ctypes.c_uint8),
+        ("right_of_way", ctypes.c_uint8),
+        ("stated", ctypes.c_uint8),
     ]
 
 
@@ -270,8 +281,10 @@ class CoreStats(_Wire):
         ("fallbacks", ctypes.c_uint64 * 3),
         ("advice_requests", ctypes.c_uint64),
         ("advice_received", ctypes.c_uint64),
-        ("advice_verdicts", ctypes.c_uint64 * 8),
+        ("advice_verdicts", ctypes.c_uint64 * 9),
         ("advice_failures", ctypes.c_uint64 * 5),
+        ("courtesy_rejects", ctypes.c_uint64),
+        ("deadlock_announcements", ctypes.c_uint64),
         ("cycle_ns", ctypes.c_uint64 * 5),
         ("scene_age_ns", ctypes.c_uint64 * 5),
         ("decide_ns", ctypes.c_uint64 * 5),

@@ -1,7 +1,9 @@
 //! The gate on the LLM's recommendation A_final (eq. 16). Advice replaces the logit choice only
 //! when it answers a request issued in the last N cycles, its confidence is ≥ 0.7, it arrived
 //! before that request's deadline, and the maneuver passes the core's own navigation and
-//! safety checks. Otherwise the logit choice stands and the reason is recorded.
+//! safety checks. Otherwise the logit choice stands and the reason is recorded. Accepted
+//! advice applies until its request's deadline: after it, the same advice is refused as
+//! expired (it is still judged once when the first cycle to see it comes after the deadline).
 
 use crate::choice::Maneuver;
 use crate::params::AdviceParams;
@@ -44,12 +46,14 @@ pub enum AdviceVerdict {
     NavigationInconsistent = 6,
     /// No feasible collision-free trajectory realises it.
     Unsafe = 7,
+    /// Judged before, and its request's deadline has passed.
+    Expired = 8,
 }
 }
 
 impl AdviceVerdict {
     /// Every verdict, by wire code.
-    pub const ALL: [AdviceVerdict; 8] = [
+    pub const ALL: [AdviceVerdict; 9] = [
         AdviceVerdict::NoAdvice,
         AdviceVerdict::Accepted,
         AdviceVerdict::Malformed,
@@ -58,6 +62,7 @@ impl AdviceVerdict {
         AdviceVerdict::Late,
         AdviceVerdict::NavigationInconsistent,
         AdviceVerdict::Unsafe,
+        AdviceVerdict::Expired,
     ];
     /// snake_case name.
     pub fn name(self) -> &'static str {
@@ -70,6 +75,7 @@ impl AdviceVerdict {
             AdviceVerdict::Late => "late",
             AdviceVerdict::NavigationInconsistent => "navigation_inconsistent",
             AdviceVerdict::Unsafe => "unsafe",
+            AdviceVerdict::Expired => "expired",
         }
     }
 }
@@ -113,10 +119,13 @@ impl RequestLog {
 }
 
 /// Checks of eq. 16 that need no trajectory, in order; `Ok` means only the safety check remains.
+/// `now` is the core's clock, s; `first_look` is true when no earlier cycle judged this advice.
 pub fn pre_check(
     advice: &Advice,
     log: &RequestLog,
     route: Turn,
+    now: f64,
+    first_look: bool,
     p: &AdviceParams,
 ) -> Result<Maneuver, AdviceVerdict> {
     if !advice.confidence.is_finite() || !advice.received_at_s.is_finite() {
@@ -125,6 +134,9 @@ pub fn pre_check(
     let deadline = log
         .deadline(advice.request_id, p)
         .ok_or(AdviceVerdict::UnknownRequest)?;
+    if now > deadline && !first_look {
+        return Err(AdviceVerdict::Expired);
+    }
     if advice.confidence < p.confidence_min {
         return Err(AdviceVerdict::LowConfidence);
     }
@@ -142,13 +154,15 @@ pub fn gate(
     advice: Option<&Advice>,
     log: &RequestLog,
     route: Turn,
+    now: f64,
+    first_look: bool,
     p: &AdviceParams,
     is_safe: impl FnOnce(Maneuver) -> bool,
 ) -> (Option<Maneuver>, AdviceVerdict) {
     let Some(advice) = advice else {
         return (None, AdviceVerdict::NoAdvice);
     };
-    match pre_check(advice, log, route, p) {
+    match pre_check(advice, log, route, now, first_look, p) {
         Err(v) => (None, v),
         Ok(m) if is_safe(m) => (Some(m), AdviceVerdict::Accepted),
         Ok(_) => (None, AdviceVerdict::Unsafe),

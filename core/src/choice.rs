@@ -1,11 +1,17 @@
 //! Maneuver choice: attributes x_i (matching, safety, efficiency), utility V_i = βᵀx_i (eq. 9),
 //! multinomial logit P_ni (eq. 11), history consistency γ·D_prev (eq. 12–13), switch penalty λ
 //! (eq. 14) and the corrected logit (eq. 15).
+//!
+//! The safety degree weighs, per conflict, how the ego's and the other's occupancies of the
+//! conflict zone would be separated in time (the post-encroachment margin) under each
+//! behaviour the other may still take, and the courtesy check refuses plans that would make
+//! another road user brake hard; see [`conflict_risk`], [`imposed_decel`], [`choose`].
 
 use libm::{exp, sqrt};
 
+use crate::intent::Stated;
 use crate::opm::{ConflictPair, ConflictSet, OpmTriplet};
-use crate::params::{ChoiceParams, OpmParams};
+use crate::params::{ChoiceParams, InteractionParams, OpmParams};
 use crate::saliency::softmax;
 use crate::scene::{IntentAction, Style, Turn};
 
@@ -73,8 +79,9 @@ impl Maneuver {
 }
 
 /// Nominal longitudinal profile of a maneuver: accelerate at `accel` until `target_speed`,
-/// then hold it. Also the nominal terminal state f_a(s_start) of eq. 23.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// then hold it, and stop `stop_m` ahead when that is finite. Also the nominal terminal state
+/// f_a(s_start) of eq. 23.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Profile {
     /// m/s², signed.
     pub accel: f64,
@@ -82,15 +89,34 @@ pub struct Profile {
     pub target_speed: f64,
     /// Duration T of the polynomial, s.
     pub duration: f64,
-    /// True when the profile stops before a conflict zone.
-    pub yields: bool,
+    /// The profile yields: it goes no further than this, m (∞ when it does not yield).
+    pub stop_m: f64,
+}
+
+impl Default for Profile {
+    fn default() -> Self {
+        Profile {
+            accel: 0.0,
+            target_speed: 0.0,
+            duration: 0.0,
+            stop_m: f64::INFINITY,
+        }
+    }
 }
 
 impl Profile {
+    /// True when the profile stops before a conflict zone.
+    pub fn yields(&self) -> bool {
+        self.stop_m.is_finite()
+    }
+
     /// Time to travel `d` m from speed `v0` under this profile; ∞ if it stops first.
     pub fn arrival_time(&self, v0: f64, d: f64) -> f64 {
         if d <= 0.0 {
             return 0.0;
+        }
+        if d > self.stop_m {
+            return f64::INFINITY;
         }
         let (a, vt) = (self.accel, self.target_speed);
         if a.abs() < 1e-9 {
@@ -124,50 +150,73 @@ pub struct EgoContext {
     pub speed_cap: f64,
     /// Distance to the point where a yielding ego must stop, m (∞ when nothing to yield to).
     pub yield_distance: f64,
+    /// Distance whose traversal measures efficiency: through the nearest conflict zone ahead,
+    /// or the reference distance when there is none, m.
+    pub goal_distance: f64,
     /// Navigation instruction: the turn of the route lane.
     pub route: Turn,
     /// Largest braking of planned trajectories, m/s².
     pub max_brake: f64,
     pub min_duration: f64,
     pub max_duration: f64,
+    /// Horizon of the planner's checks, s.
+    pub plan_horizon_s: f64,
 }
 
 /// Below this speed the ego counts as stopped for the idle penalty, m/s.
 const IDLE_SPEED_MPS: f64 = 0.1;
+/// A yielding ego more than [`CREEP_FROM_M`] short of its yield point and too slow to reach it
+/// with one stopping polynomial creeps up to it at this speed at most, m/s.
+const CREEP_MPS: f64 = 2.0;
+const CREEP_FROM_M: f64 = 1.0;
+
+/// Profile that goes from the ego's speed towards `target` (clamped to the speed cap) at the
+/// nominal acceleration or deceleration, over at least the maneuver horizon.
+pub fn toward(target: f64, ctx: &EgoContext, p: &ChoiceParams) -> Profile {
+    let v0 = ctx.speed;
+    let target = target.clamp(0.0, ctx.speed_cap.max(0.0));
+    let accel = if target > v0 {
+        p.accelerate_mps2
+    } else if target < v0 {
+        -p.decelerate_mps2
+    } else {
+        0.0
+    };
+    let ramp = if accel == 0.0 {
+        0.0
+    } else {
+        (target - v0) / accel
+    };
+    Profile {
+        accel,
+        target_speed: target,
+        duration: ramp
+            .max(p.maneuver_horizon_s)
+            .clamp(ctx.min_duration, ctx.max_duration),
+        stop_m: f64::INFINITY,
+    }
+}
 
 /// Nominal profile of maneuver `m`.
 pub fn profile(m: Maneuver, ctx: &EgoContext, p: &ChoiceParams) -> Profile {
     let v0 = ctx.speed;
     let h = p.maneuver_horizon_s;
     let cap = ctx.speed_cap.max(0.0);
-    let toward = |target: f64| {
-        let target = target.clamp(0.0, cap);
-        let accel = if target > v0 {
-            p.accelerate_mps2
-        } else if target < v0 {
-            -p.decelerate_mps2
-        } else {
-            0.0
-        };
-        let ramp = if accel == 0.0 {
-            0.0
-        } else {
-            (target - v0) / accel
-        };
-        Profile {
-            accel,
-            target_speed: target,
-            duration: ramp.max(h).clamp(ctx.min_duration, ctx.max_duration),
-            yields: false,
-        }
-    };
+    let toward = |target: f64| toward(target, ctx, p);
     match m {
         Maneuver::Accelerate => toward(v0 + p.accelerate_mps2 * h),
         Maneuver::KeepSpeed => toward(v0),
         Maneuver::TurnLeft | Maneuver::TurnRight => toward(cap),
         Maneuver::Decelerate => {
             let d = ctx.yield_distance;
-            if d.is_finite() && d > 0.0 {
+            if d.is_finite() && d > CREEP_FROM_M && 2.0 * d > v0 * ctx.max_duration {
+                // Too slow to reach the yield point with one stopping polynomial: creep up to
+                // it, slowly enough to stop there after the planning horizon.
+                Profile {
+                    stop_m: d,
+                    ..toward(CREEP_MPS.min(0.8 * d / ctx.plan_horizon_s))
+                }
+            } else if d.is_finite() && d > 0.0 {
                 // Stop at the yield point: a quartic with v_T = a_T = 0 from rest acceleration
                 // covers v0·T/2, so T = 2d/v0.
                 let accel = -(v0 * v0 / (2.0 * d)).min(ctx.max_brake);
@@ -180,7 +229,7 @@ pub fn profile(m: Maneuver, ctx: &EgoContext, p: &ChoiceParams) -> Profile {
                     accel,
                     target_speed: 0.0,
                     duration,
-                    yields: true,
+                    stop_m: d,
                 }
             } else {
                 toward(v0 - p.decelerate_mps2 * h)
@@ -233,6 +282,12 @@ pub struct ChoiceOutcome {
     pub attributes: [[f64; ATTRIBUTES]; MANEUVERS],
     /// Safety degree in [0, 1] before weighting, per maneuver.
     pub safety: [f64; MANEUVERS],
+    /// Efficiency degree before weighting, per maneuver.
+    pub efficiency: [f64; MANEUVERS],
+    /// Largest deceleration the maneuver would impose on another road user, m/s².
+    pub imposed_decel: [f64; MANEUVERS],
+    /// Refused for courtesy: it would impose more than `max_imposed_decel_mps2`.
+    pub courtesy_rejected: [bool; MANEUVERS],
     /// Safety and efficiency preferences from intents and conflict intensity.
     pub safety_preference: f64,
     pub efficiency_preference: f64,
@@ -255,8 +310,15 @@ pub struct ChoiceOutcome {
 }
 
 /// Safety and efficiency preferences from explicit intents (strong ones only) and conflict
-/// intensity. Priority task > action > style is carried by the gains' magnitudes.
-pub fn preferences(triplet: &OpmTriplet, opm: &OpmParams, p: &ChoiceParams) -> (f64, f64) {
+/// intensity. Priority task > action > style is carried by the gains' magnitudes. A road
+/// user's stated yield counts only where its motion agreed (its conflict's implicit intent
+/// counted it, see [`crate::intent`]).
+pub fn preferences(
+    triplet: &OpmTriplet,
+    conflicts: &ConflictSet,
+    opm: &OpmParams,
+    p: &ChoiceParams,
+) -> (f64, f64) {
     let th = opm.intent_confidence_min;
     let (mut ws, mut we) = (1.0, 1.0);
     let ego = &triplet.ego_intent;
@@ -281,9 +343,16 @@ pub fn preferences(triplet: &OpmTriplet, opm: &OpmParams, p: &ChoiceParams) -> (
         if other.strong_style(th) == Some(Style::Aggressive) {
             ws += p.other_aggressive_safety;
         }
+        let counted = conflicts
+            .pairs()
+            .iter()
+            .find(|c| c.agent == pair.agent)
+            .map(|c| c.intent.stated);
         match other.strong_action(th) {
             Some(IntentAction::Proceed | IntentAction::Accelerate) => ws += p.other_proceeds_safety,
-            Some(IntentAction::Yield | IntentAction::Stop | IntentAction::Decelerate) => {
+            Some(IntentAction::Yield | IntentAction::Stop | IntentAction::Decelerate)
+                if counted != Some(Stated::Contradicted) =>
+            {
                 we += p.other_yields_efficiency
             }
             _ => {}
@@ -293,28 +362,162 @@ pub fn preferences(triplet: &OpmTriplet, opm: &OpmParams, p: &ChoiceParams) -> (
     (ws.max(0.1), we.max(0.1))
 }
 
-/// Safety degree of a profile in [0, 1]: 1 − max over conflicts of
-/// exp(−Δt² / (2σ²)), Δt = |t_ego(profile) − TTC_agent|, σ = ΔT_th / 2.
-pub fn safety_degree(
-    profile: &Profile,
-    ego_speed: f64,
-    conflicts: &[ConflictPair],
-    opm: &OpmParams,
-) -> f64 {
-    let sigma = opm.delta_ttc_threshold_s / 2.0;
-    let mut risk: f64 = 0.0;
-    for c in conflicts {
-        if c.agent_ttc_s >= opm.ttc_max_s {
-            continue;
-        }
-        let t_ego = profile.arrival_time(ego_speed, c.ego_dist_m);
-        if !t_ego.is_finite() {
-            continue;
-        }
-        let dt = t_ego - c.agent_ttc_s;
-        risk = risk.max(exp(-dt * dt / (2.0 * sigma * sigma)));
+/// Time for a road user at speed `v` accelerating at `a` (≥ 0, no cap) to cover `d` m, s.
+fn time_to_cover(v: f64, a: f64, d: f64) -> f64 {
+    if d <= 0.0 {
+        0.0
+    } else if a > 1e-9 {
+        (-v + sqrt(v * v + 2.0 * a * d)) / a
+    } else if v > 1e-9 {
+        d / v
+    } else {
+        f64::INFINITY
     }
-    1.0 - risk
+}
+
+/// The other's occupancy of its passage if it proceeds, [enter, exit] in s from now: it
+/// enters at the earliest when accelerating at its shown acceleration or
+/// `proceed_accel_mps2`, whichever is higher, and leaves at the latest when holding its speed
+/// (at least `proceed_min_speed_mps`).
+pub fn proceeding_interval(c: &ConflictPair, ip: &InteractionParams) -> (f64, f64) {
+    let v = c.agent_speed_mps;
+    let a = c.agent_accel_mps2.max(ip.proceed_accel_mps2);
+    let [d_in, d_out] = c.agent_pass_m;
+    let t_in = time_to_cover(v, a, d_in);
+    let t_out = time_to_cover(v, a, d_out).max(d_out.max(0.0) / v.max(ip.proceed_min_speed_mps));
+    (t_in, t_out)
+}
+
+/// The ego's occupancy of its passage under `profile` from speed `v0`, [enter, exit] in s
+/// from now (∞ for a part it does not reach: a yielding profile stops before).
+pub fn ego_interval(profile: &Profile, v0: f64, c: &ConflictPair) -> (f64, f64) {
+    let [d_in, d_out] = c.ego_pass_m;
+    (
+        profile.arrival_time(v0, d_in.max(0.0)),
+        profile.arrival_time(v0, d_out),
+    )
+}
+
+/// Collision risk of `profile` against conflict `c`, in [0, 1]: with the ego's occupancy
+/// [t_in, t_out] and the other's proceeding one [a_in, a_out] ([`proceeding_interval`]), the
+/// margin going first is a_in − t_out (it needs `pet_go_s`) and passing behind t_in − a_out
+/// (it needs `pet_behind_s`); the shortfall s of the better order gives
+/// r = 1 − exp(−s² / 2σ²), σ = pet_go_s / 2, weighted by the probability 1 − `yields` that
+/// the other does not let the ego go first. A profile that does not enter has no risk; one
+/// that would stand in the passage, r = 1.
+pub fn conflict_risk(
+    profile: &Profile,
+    v0: f64,
+    c: &ConflictPair,
+    yields: f64,
+    ip: &InteractionParams,
+) -> f64 {
+    let (t_in, t_out) = ego_interval(profile, v0, c);
+    if !t_in.is_finite() {
+        return 0.0;
+    }
+    let r = if t_out.is_finite() {
+        let (a_in, a_out) = proceeding_interval(c, ip);
+        let short = (ip.pet_go_s - (a_in - t_out))
+            .min(ip.pet_behind_s - (t_in - a_out))
+            .max(0.0);
+        let sigma = 0.5 * ip.pet_go_s;
+        1.0 - exp(-short * short / (2.0 * sigma * sigma))
+    } else {
+        1.0
+    };
+    (1.0 - yields.clamp(0.0, 1.0)) * r
+}
+
+/// The deceleration `profile` would impose on the other of conflict `c`, m/s²: when the ego
+/// goes first, the other must not enter its passage before the ego has left it plus
+/// `pet_behind_s`; after `reaction_s` at its speed v, with D m left and T s to go, it needs
+/// b = 2(vT − D)/T² (or v²/2D when that stops it first). A road user already yielding
+/// (`yields` ≥ `trust_yield`) has its own braking subtracted. 0 when the ego passes behind,
+/// does not enter, or the other is committed (then [`conflict_risk`] speaks).
+pub fn imposed_decel(
+    profile: &Profile,
+    v0: f64,
+    c: &ConflictPair,
+    yields: f64,
+    ip: &InteractionParams,
+) -> f64 {
+    let (t_in, t_out) = ego_interval(profile, v0, c);
+    if !t_in.is_finite() || c.intent.committed {
+        return 0.0;
+    }
+    let (a_in, a_out) = proceeding_interval(c, ip);
+    let ego_first = a_in - t_out >= t_in - a_out;
+    if !ego_first {
+        return 0.0;
+    }
+    let v = c.agent_speed_mps;
+    let d = c.agent_pass_m[0] - v * ip.reaction_s;
+    let t = t_out + ip.pet_behind_s - ip.reaction_s;
+    let needed = if v < 1e-6 || v * t <= d {
+        0.0
+    } else if d <= 0.0 || t <= 0.0 {
+        f64::INFINITY
+    } else {
+        let b = 2.0 * (v * t - d) / (t * t);
+        if b * t <= v {
+            b
+        } else {
+            v * v / (2.0 * d)
+        }
+    };
+    if yields >= ip.trust_yield {
+        (needed - c.intent.required_decel_mps2.min(needed)).max(0.0)
+    } else {
+        needed
+    }
+}
+
+/// Efficiency degree of `profile`: the time to cover `ctx.goal_distance` at the reference
+/// speed over the time it takes, in [0, 1.5]. A yielding profile takes the time to its yield
+/// point or `wait_s` (how long the way is expected to stay taken), whichever is longer, then
+/// the rest from standstill at the nominal acceleration.
+pub fn efficiency(profile: &Profile, ctx: &EgoContext, wait_s: f64, p: &ChoiceParams) -> f64 {
+    let d = ctx.goal_distance;
+    let free = d / p.reference_speed_mps;
+    let taken = if profile.yields() && ctx.yield_distance < d {
+        let restart = Profile {
+            accel: p.accelerate_mps2,
+            target_speed: ctx.speed_cap.max(1.0),
+            ..Profile::default()
+        };
+        profile.duration.max(wait_s) + restart.arrival_time(0.0, d - ctx.yield_distance)
+    } else {
+        profile.arrival_time(ctx.speed, d)
+    };
+    if taken.is_finite() && taken > 0.0 {
+        (free / taken).clamp(0.0, 1.5)
+    } else if taken == 0.0 {
+        1.5
+    } else {
+        0.0
+    }
+}
+
+/// How long a yielding ego expects to wait for the way to clear, s: for each conflicting road
+/// user that is arriving (TTC below the cap) and whose passage the ego has not entered, its
+/// proceeding exit if it proceeds, `deadlock_wait_s` if it waits too (probability `yields`);
+/// the longest.
+pub fn expected_wait(
+    conflicts: &[ConflictPair],
+    yields: &[f64],
+    opm: &OpmParams,
+    ip: &InteractionParams,
+) -> f64 {
+    conflicts
+        .iter()
+        .zip(yields)
+        .filter(|(c, _)| c.agent_ttc_s < opm.ttc_max_s && c.ego_pass_m[0] > 0.0)
+        .map(|(c, &y)| {
+            let (_, a_out) = proceeding_interval(c, ip);
+            (1.0 - y) * a_out + y * ip.deadlock_wait_s
+        })
+        .fold(0.0, f64::max)
 }
 
 /// Scene state x_n for eq. 13, centred so that cosine similarity separates situations.
@@ -442,51 +645,126 @@ pub fn argmax(p: &[f64; MANEUVERS]) -> Maneuver {
     Maneuver::ALL[best]
 }
 
-/// Runs eq. 9–15 for one scene; `conflicts` holds the ego's conflicts with every agent.
+/// Target-speed factors at which a maneuver that goes is judged (see [`choose`]).
+pub const TIMING_FACTORS: [f64; 3] = [1.0, 0.8, 0.6];
+
+/// One maneuver at one timing, as [`choose`] judged it.
+#[derive(Clone, Copy)]
+struct Judged {
+    profile: Profile,
+    attributes: [f64; ATTRIBUTES],
+    safety: f64,
+    efficiency: f64,
+    imposed: f64,
+    rejected: bool,
+}
+
+/// Runs eq. 9–15 for one scene; `conflicts` holds the ego's conflicts with every agent and
+/// `yields[k]` the probability that the other of `conflicts.pairs()[k]` lets the ego go first.
+#[allow(clippy::too_many_arguments)]
 pub fn choose(
     triplet: &OpmTriplet,
     conflicts: &ConflictSet,
+    yields: &[f64],
     ctx: &EgoContext,
     history: &ChoiceHistory,
     opm: &OpmParams,
+    ip: &InteractionParams,
     p: &ChoiceParams,
     out: &mut ChoiceOutcome,
 ) {
-    let (ws, we) = preferences(triplet, opm, p);
+    let (ws, we) = preferences(triplet, conflicts, opm, p);
     out.safety_preference = ws;
     out.efficiency_preference = we;
     let a_idm = triplet
         .leader
         .map(|l| idm_accel(ctx.speed, l.gap_m, ctx.speed - l.speed_mps, p));
-    // Stopped, yielding to nothing, and free to move off (no leader, or one IDM would follow).
+    let pairs = conflicts.pairs();
+    // Stopped with no reason to wait: nothing to yield to, or a maneuver of the route that
+    // goes at its nominal timing is free of risk and imposes nothing; and free to move off
+    // (no leader, or one IDM would follow).
+    let free_to_go = || {
+        Maneuver::ALL
+            .into_iter()
+            .filter(|m| *m != Maneuver::Decelerate && m.consistent_with(ctx.route))
+            .map(|m| profile(m, ctx, p))
+            .filter(|prof| prof.target_speed >= 1.0)
+            .any(|prof| {
+                pairs.iter().zip(yields).all(|(c, &y)| {
+                    conflict_risk(&prof, ctx.speed, c, y, ip) < 0.01
+                        && imposed_decel(&prof, ctx.speed, c, y, ip) <= ip.max_imposed_decel_mps2
+                })
+            })
+    };
     let idle = ctx.speed < IDLE_SPEED_MPS
-        && ctx.yield_distance.is_infinite()
-        && a_idm.is_none_or(|a| a > 0.0);
+        && a_idm.is_none_or(|a| a > 0.0)
+        && (ctx.yield_distance.is_infinite() || free_to_go());
+    let wait = expected_wait(pairs, yields, opm, ip);
     for m in Maneuver::ALL {
         let i = m.index();
-        let prof = profile(m, ctx, p);
-        out.profiles[i] = prof;
-        let mut matching = 1.0;
-        if let Some(a_idm) = a_idm {
-            matching -=
-                p.idm_penalty_gain * (prof.accel - a_idm).max(0.0) / p.idm_comfort_decel_mps2;
+        let nominal = profile(m, ctx, p);
+        // A maneuver that goes is judged at its best timing: its nominal target speed, or a
+        // slower one that lets a crossing road user pass first (the planner samples around it).
+        let timings = if m == Maneuver::Decelerate || nominal.target_speed < 1.0 {
+            1
+        } else {
+            TIMING_FACTORS.len()
+        };
+        let mut best: Option<(f64, Judged)> = None;
+        for factor in TIMING_FACTORS.iter().take(timings) {
+            let prof = if *factor == 1.0 {
+                nominal
+            } else {
+                toward(nominal.target_speed * factor, ctx, p)
+            };
+            let mut matching = 1.0;
+            if let Some(a_idm) = a_idm {
+                matching -=
+                    p.idm_penalty_gain * (prof.accel - a_idm).max(0.0) / p.idm_comfort_decel_mps2;
+            }
+            if !m.consistent_with(ctx.route) {
+                matching -= p.navigation_penalty;
+            }
+            if idle && (prof.target_speed < IDLE_SPEED_MPS || prof.yields()) {
+                matching -= p.idle_penalty;
+            }
+            let (mut risk, mut imposed) = (0.0_f64, 0.0_f64);
+            for (c, &y) in pairs.iter().zip(yields) {
+                risk = risk.max(conflict_risk(&prof, ctx.speed, c, y, ip));
+                imposed = imposed.max(imposed_decel(&prof, ctx.speed, c, y, ip));
+            }
+            let rejected = imposed > ip.max_imposed_decel_mps2;
+            let eff = efficiency(&prof, ctx, wait, p);
+            let attributes = [matching, ws * (1.0 - risk), we * eff];
+            let utility = p
+                .beta
+                .iter()
+                .zip(&attributes)
+                .map(|(b, x)| b * x)
+                .sum::<f64>()
+                - if rejected { ip.courtesy_penalty } else { 0.0 };
+            if best.is_none_or(|(u, _)| utility > u + 1e-9) {
+                best = Some((
+                    utility,
+                    Judged {
+                        profile: prof,
+                        attributes,
+                        safety: 1.0 - risk,
+                        efficiency: eff,
+                        imposed,
+                        rejected,
+                    },
+                ));
+            }
         }
-        if !m.consistent_with(ctx.route) {
-            matching -= p.navigation_penalty;
-        }
-        if idle && prof.target_speed < IDLE_SPEED_MPS {
-            matching -= p.idle_penalty;
-        }
-        let safety = safety_degree(&prof, ctx.speed, conflicts.pairs(), opm);
-        out.safety[i] = safety;
-        let efficiency = (prof.target_speed / p.reference_speed_mps).clamp(0.0, 1.5);
-        out.attributes[i] = [matching, ws * safety, we * efficiency];
-        out.utility[i] = p
-            .beta
-            .iter()
-            .zip(&out.attributes[i])
-            .map(|(b, x)| b * x)
-            .sum();
+        let (utility, j) = best.expect("at least one timing");
+        out.profiles[i] = j.profile;
+        out.attributes[i] = j.attributes;
+        out.safety[i] = j.safety;
+        out.efficiency[i] = j.efficiency;
+        out.imposed_decel[i] = j.imposed;
+        out.courtesy_rejected[i] = j.rejected;
+        out.utility[i] = utility;
     }
     softmax(&out.utility, &mut out.p_logit);
     out.state = state_features(triplet, ctx, opm, p);

@@ -33,6 +33,8 @@ macro_rules! coded_enum {
 
 pub mod advice;
 pub mod choice;
+pub mod intent;
+pub mod negotiation;
 pub mod opm;
 pub mod params;
 pub mod saliency;
@@ -48,10 +50,13 @@ pub use trajectory::{Trajectory, TrajectoryPoint};
 
 use advice::RequestLog;
 use choice::{ChoiceHistory, ChoiceOutcome, EgoContext, Profile};
-use opm::{ConflictSet, OpmTriplet};
+use negotiation::{Negotiation, Phase};
+use opm::{ConflictPair, ConflictSet, OpmTriplet};
 use saliency::Saliency;
-use scene::{History, Lane, ProcessState, SceneErrorKind, SceneField, Vec2, MAX_AGENTS};
-use trajectory::{Candidate, FrenetState, PlanStats, Planner};
+use scene::{
+    History, Lane, ProcessState, RightOfWay, SceneErrorKind, SceneField, Vec2, MAX_AGENTS,
+};
+use trajectory::{Candidate, Forecast, FrenetState, PlanStats, Planner};
 
 coded_enum! {
 /// Which path produced a decision.
@@ -80,6 +85,18 @@ pub enum FallbackReason {
 }
 }
 
+coded_enum! {
+/// What the decision tells the other road users on the eHMI.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Announcement {
+    /// "I am slowing down; please go ahead."
+    #[default]
+    GivingWay = 0,
+    /// "I am going first; please wait."
+    GoingFirst = 1,
+}
+}
+
 /// One decision of the core.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Decision {
@@ -98,6 +115,14 @@ pub struct Decision {
     /// What the gate made of the advice offered this cycle.
     pub advice: AdviceVerdict,
     pub fallback: FallbackReason,
+    /// What the eHMI announces: giving way when the executed maneuver gives way, going first
+    /// otherwise or while a deadlock negotiation has announced it.
+    pub announce: Announcement,
+    /// Phase of the deadlock negotiation.
+    pub negotiation: Phase,
+    /// Maneuvers refused this cycle because they would make another road user brake harder
+    /// than `max_imposed_decel_mps2`.
+    pub courtesy_rejects: u8,
     pub trajectory: Trajectory,
     /// Monte Carlo statistics of the executed plan.
     pub plan: PlanStats,
@@ -121,12 +146,23 @@ pub struct DecisionCore {
     planner: Planner,
     last: Decision,
     ego_lane: u8,
+    negotiation: Negotiation,
+    /// Probability that the other of each conflict pair lets the ego go first.
+    yields: [f64; MAX_AGENTS],
+    forecasts: [Forecast; MAX_AGENTS],
+    /// Request id of the last advice the gate judged (0: none).
+    last_advice_id: u64,
 }
 
 impl DecisionCore {
-    /// A core for `morph` with validated `params`.
-    pub fn new(params: Params, morph: Morphology) -> Result<Self, ParamError> {
+    /// A core for `morph` with validated `params`; the conflict zones are derived for the
+    /// core's footprint.
+    pub fn new(params: Params, mut morph: Morphology) -> Result<Self, ParamError> {
         params.validate()?;
+        morph.fit_footprint(
+            params.trajectory.vehicle_length_m,
+            params.trajectory.vehicle_width_m,
+        );
         Ok(DecisionCore {
             params,
             morph,
@@ -143,6 +179,10 @@ impl DecisionCore {
             planner: Planner::default(),
             last: Decision::default(),
             ego_lane: 0,
+            negotiation: Negotiation::default(),
+            yields: [0.0; MAX_AGENTS],
+            forecasts: [Forecast::default(); MAX_AGENTS],
+            last_advice_id: 0,
         })
     }
 
@@ -180,6 +220,19 @@ impl DecisionCore {
     pub fn last_decision(&self) -> &Decision {
         &self.last
     }
+    /// The planner's forecast of every agent's motion in the last step, in scene order.
+    pub fn forecasts(&self) -> &[Forecast; MAX_AGENTS] {
+        &self.forecasts
+    }
+    /// The deadlock negotiation after the last step.
+    pub fn negotiation(&self) -> &Negotiation {
+        &self.negotiation
+    }
+    /// Probability that the other of each of [`DecisionCore::conflicts`] lets the ego go first,
+    /// in the same order.
+    pub fn yields(&self) -> &[f64] {
+        &self.yields[..self.conflicts.pairs().len()]
+    }
 
     /// Runs the whole method on one scene. `now` is the host's monotonic clock, s, against
     /// which advice deadlines are kept; `advice` is the newest advice received, if any.
@@ -201,6 +254,7 @@ impl DecisionCore {
             // A restarted source: the histories belong to another timeline.
             self.history = History::default();
             self.choices = ChoiceHistory::default();
+            self.negotiation = Negotiation::default();
         }
         self.last_scene_time_s = scene.time_s;
         self.cycle += 1;
@@ -216,7 +270,9 @@ impl DecisionCore {
             scene,
             &self.morph,
             &p.opm,
+            &p.interaction,
             &self.processes,
+            &self.history,
             &mut self.triplet,
             &mut self.conflicts,
         );
@@ -231,28 +287,52 @@ impl DecisionCore {
 
         let lane = *self.morph.lane(scene.ego_lane);
         let start = frenet_start(&scene.ego, &lane, &p);
-        let ctx = self.ego_context(&lane, &start);
+        let agents = scene.agents();
+        self.negotiation.update(
+            self.conflicts.pairs(),
+            |k| agents[k as usize].id,
+            start.ds.max(0.0),
+            scene.time_s,
+            &p.interaction,
+        );
+        self.expect(agents);
+        let (yield_distance, clear_distance, every_lane) =
+            self.yield_point(start.s, start.ds.max(0.0));
+        let ctx = self.ego_context(&lane, &start, yield_distance);
         choice::choose(
             &self.triplet,
             &self.conflicts,
+            &self.yields[..self.conflicts.pairs().len()],
             &ctx,
             &self.choices,
             &p.opm,
+            &p.interaction,
             &p.choice,
             &mut self.choice,
         );
 
         self.planner.prepare(
-            &lane,
+            scene.ego_lane,
             start,
-            self.goal_distance(),
-            scene.agents(),
+            ctx.goal_distance,
+            agents,
             &self.processes,
+            &self.forecasts,
             &self.morph,
             &p.trajectory,
         );
-        self.planner.yield_distance = ctx.yield_distance;
-        self.planner.clear_distance = ctx.yield_distance + stop_before_m(&p) + clear_past_m(&p);
+        self.planner.yield_distance = yield_distance;
+        self.planner.clear_distance = clear_distance;
+        if !every_lane {
+            // No waiting point outside every zone is left: the planner may stand where the
+            // yield point does, in zones of lanes without traffic.
+            self.planner.keep_zones(
+                self.conflicts
+                    .pairs()
+                    .iter()
+                    .map(|c| [start.s + c.ego_zone_m[0], start.s + c.ego_zone_m[1]]),
+            );
+        }
 
         let mut decision = Decision {
             cycle: self.cycle,
@@ -260,19 +340,35 @@ impl DecisionCore {
             logit_maneuver: self.choice.choice,
             p_logit: self.choice.p_logit,
             p_corrected: self.choice.p_corrected,
+            negotiation: self.negotiation.phase,
+            courtesy_rejects: self.choice.courtesy_rejected.iter().filter(|r| **r).count() as u8,
             ..Decision::default()
         };
-        // Eq. 16: the advice is tried first; its safety check is a full planning run.
+        // Eq. 16: the advice is tried first; its safety check is a full planning run. An
+        // advice applies until its request's deadline, and at least at the first cycle that
+        // judges it.
+        let first_look = advice.is_some_and(|a| a.request_id != self.last_advice_id);
+        if let Some(a) = advice {
+            self.last_advice_id = a.request_id;
+        }
         let mut planned: Option<(Maneuver, Option<Candidate>, PlanStats)> = None;
         let (advised, verdict) = {
             let planner = &mut self.planner;
             let profiles = &self.choice.profiles;
             let cycle = self.cycle;
-            advice::gate(advice, &self.requests, lane.turn, &p.advice, |m| {
-                let (best, stats) = plan(planner, &profiles[m.index()], cycle, &p);
-                planned = Some((m, best, stats));
-                best.is_some()
-            })
+            advice::gate(
+                advice,
+                &self.requests,
+                lane.turn,
+                now,
+                first_look,
+                &p.advice,
+                |m| {
+                    let (best, stats) = plan(planner, &profiles[m.index()], cycle, &p);
+                    planned = Some((m, best, stats));
+                    best.is_some()
+                },
+            )
         };
         decision.advice = verdict;
         let mut executed: Option<(Maneuver, Candidate, PlanStats)> = None;
@@ -308,41 +404,76 @@ impl DecisionCore {
                 decision.plan = stats;
                 self.planner.render(&best, &lane, &mut decision.trajectory);
             }
-            None => {
-                decision.maneuver = Maneuver::Decelerate;
-                decision.source = DecisionSource::MinimumRisk;
-                decision.fallback = FallbackReason::NoFeasibleTrajectory;
-                self.planner.minimum_risk(
-                    ctx.yield_distance,
-                    &lane,
-                    &p.trajectory,
-                    &mut decision.trajectory,
-                );
-                // Braking where the ego stands can be the worst choice inside a junction, in
-                // the path of crossing traffic. When braking is predicted to be hit too, the
-                // dynamically feasible plan holding or gaining speed that postpones the first
-                // predicted contact longest is taken instead, if it does: it leaves the
-                // others the most time to react.
-                if let Some(mut latest) = self.planner.first_contact(&decision.trajectory) {
-                    let n = p.trajectory.samples;
-                    for m in [Maneuver::KeepSpeed, Maneuver::Accelerate] {
-                        let profile = &self.choice.profiles[m.index()];
-                        self.planner.sample(profile, n, self.cycle, &p.trajectory);
-                        if let Some((c, t)) = self.planner.latest_contact(n, &p.trajectory) {
-                            if t > latest {
-                                latest = t;
-                                decision.maneuver = m;
-                                self.planner.render(&c, &lane, &mut decision.trajectory);
-                            }
-                        }
-                    }
-                }
-            }
+            None => self.minimum_risk(ctx.yield_distance, &lane, &mut decision),
         }
+        decision.announce = if self.negotiation.announces() || !decision.maneuver.gives_way() {
+            Announcement::GoingFirst
+        } else {
+            Announcement::GivingWay
+        };
         self.choices
             .record(scene.time_s, self.choice.state, decision.maneuver);
         self.last = decision;
         Ok(decision)
+    }
+
+    /// The minimum-risk fallback into `decision` ([`Planner::fallback`]), driving on, if at
+    /// all, as "keep speed" or "accelerate" would.
+    fn minimum_risk(&mut self, stop_distance: f64, lane: &Lane, decision: &mut Decision) {
+        decision.source = DecisionSource::MinimumRisk;
+        decision.fallback = FallbackReason::NoFeasibleTrajectory;
+        let drive_on = [Maneuver::KeepSpeed, Maneuver::Accelerate];
+        let profiles = drive_on.map(|m| self.choice.profiles[m.index()]);
+        decision.maneuver = self
+            .planner
+            .fallback(
+                stop_distance,
+                lane,
+                &profiles,
+                self.cycle,
+                &self.params.trajectory,
+                &mut decision.trajectory,
+            )
+            .map_or(Maneuver::Decelerate, |k| drive_on[k]);
+    }
+
+    /// Expectations about every conflicting road user: the probability that it lets the ego
+    /// go first, and the planner's forecast of its motion. It counts as yielding for sure
+    /// when it kept waiting after the ego announced it goes first, or when the ego has the
+    /// right of way and it can still stop comfortably; otherwise its implicit intent says.
+    /// The planner forecasts a stop before its zone when it yields with at least
+    /// `trust_yield` and needs no more than `max_imposed_decel_mps2` for it (courtesy: the
+    /// ego does not count on harder braking); otherwise it drives on at the acceleration its
+    /// motion shows.
+    fn expect(&mut self, agents: &[scene::AgentState]) {
+        let ip = &self.params.interaction;
+        for (j, a) in agents.iter().enumerate() {
+            self.forecasts[j] = Forecast {
+                accel: a.longitudinal_accel(),
+                ..Forecast::default()
+            };
+        }
+        for (k, c) in self.conflicts.pairs().iter().enumerate() {
+            let id = agents[c.agent as usize].id;
+            let y = if self.negotiation.yielded(id)
+                || (c.right_of_way == RightOfWay::A && !c.intent.committed)
+            {
+                1.0
+            } else {
+                c.intent.yielding
+            };
+            self.yields[k] = y;
+            let f = &mut self.forecasts[c.agent as usize];
+            f.accel = c.agent_accel_mps2;
+            f.pet_s = [ip.pet_behind_s, ip.pet_go_s];
+            f.pass_m = c.agent_pass_m;
+            if y >= ip.trust_yield
+                && !c.intent.committed
+                && c.intent.required_decel_mps2 <= ip.max_imposed_decel_mps2
+            {
+                f.stop_in_m = (c.agent_zone_m[0] - self.params.trajectory.stop_margin_m).max(0.0);
+            }
+        }
     }
 
     /// Minimum-risk decision for a stale scene: continue from where the last trajectory puts
@@ -364,7 +495,7 @@ impl DecisionCore {
             ddl: 0.0,
         };
         let lane = *self.morph.lane(self.ego_lane);
-        let stop = self.yield_distance_from(q.s);
+        let stop = self.yield_point(q.s, q.speed.max(0.0)).0;
         let mut d = Decision {
             cycle: self.last.cycle,
             scene_time_s: self.last.scene_time_s,
@@ -382,7 +513,7 @@ impl DecisionCore {
         Some(d)
     }
 
-    fn ego_context(&self, lane: &Lane, start: &FrenetState) -> EgoContext {
+    fn ego_context(&self, lane: &Lane, start: &FrenetState, yield_distance: f64) -> EgoContext {
         let p = &self.params;
         let v0 = start.ds.max(0.0);
         let look =
@@ -392,65 +523,107 @@ impl DecisionCore {
             accel: start.dds,
             speed_cap: curve_speed_cap(lane, start.s, look, &p.trajectory)
                 .min(p.choice.desired_speed_mps),
-            yield_distance: self.yield_distance_from(start.s),
+            yield_distance,
+            goal_distance: self.goal_distance(),
             route: lane.turn,
             max_brake: p.trajectory.max_brake_mps2,
             min_duration: p.trajectory.min_duration_s,
             max_duration: p.trajectory.max_duration_s,
+            plan_horizon_s: p.trajectory.horizon_s,
         }
     }
 
-    /// Distance from arc length `s` to where a yielding ego stops: before the nearest conflict
-    /// zone, not yet reached, that an agent is approaching, by the stop margin plus half a
-    /// vehicle length. A stop point that would leave the car inside another crossing of its
-    /// lane moves back before that crossing ("don't block the box"); when no such point is
-    /// ahead, there is nothing to yield at (∞).
-    fn yield_distance_from(&self, s: f64) -> f64 {
+    /// Where a yielding ego at arc length `s` and speed `v` stops, and past where it has
+    /// cleared what it yields to, as distances from `s` (both ∞ when there is nothing to
+    /// yield at), and whether the stop point is outside every zone of its lane (else only
+    /// outside those of lanes with traffic). It stops the stop margin before the nearest conflict zone ahead whose road
+    /// user is arriving (TTC below the cap) and that it can still stop before at the
+    /// comfortable deceleration; a zone it can no longer stop before is one it clears. A stop
+    /// point that would leave the footprint inside, or within the margin of, another conflict
+    /// zone of its lane moves back before that zone ("don't block the box"). When the ego is
+    /// already past every such point, only the zones of lanes with traffic count (it stops
+    /// where it blocks nobody now); when that is past stopping too, there is no point to yield
+    /// at. It has cleared once past that conflict zone and every zone of its lane that begins
+    /// before that zone ends.
+    fn yield_point(&self, s: f64, v: f64) -> (f64, f64, bool) {
         let p = &self.params;
-        let before = stop_before_m(p);
-        let mut stop = self
+        let margin = p.trajectory.stop_margin_m;
+        let reach = v * v / (2.0 * p.interaction.comfort_decel_mps2);
+        let stoppable = |stop: f64| stop - s >= reach && stop > s;
+        let (mut stop, mut clear) = self
             .conflicts
             .pairs()
             .iter()
             .filter(|c| c.agent_ttc_s < p.opm.ttc_max_s)
-            .map(|c| c.ego_point_s - before)
-            .filter(|stop| *stop > s)
-            .fold(f64::INFINITY, f64::min);
-        // Each crossing of the ego's lane occupies [point − before, point + before]; crossings
-        // are few, so a fixed number of passes settles the stop point.
-        for _ in 0..scene::MAX_CONFLICTS {
-            let inside = self
-                .morph
-                .conflicts()
-                .iter()
-                .filter_map(
-                    |c| match (c.lane_a == self.ego_lane, c.lane_b == self.ego_lane) {
-                        (true, _) => Some(c.s_a),
-                        (_, true) => Some(c.s_b),
-                        _ => None,
-                    },
-                )
-                .find(|point| (stop - point).abs() < before);
-            match inside {
-                Some(point) => stop = point - before,
-                None => break,
+            .map(|c| (s + c.ego_zone_m[0] - margin, s + c.ego_zone_m[1]))
+            .filter(|&(stop, _)| stoppable(stop))
+            .fold((f64::INFINITY, f64::INFINITY), |a, b| {
+                if b.0 < a.0 {
+                    b
+                } else {
+                    a
+                }
+            });
+        // Zones are few, so a fixed number of passes settles the stop point: first against
+        // every zone of the lane; when the ego is already too far into the junction for that,
+        // against the zones of the lanes that have traffic now.
+        let settle = |mut stop: f64, every_lane: bool| {
+            for _ in 0..scene::MAX_CONFLICTS {
+                let blocks = |z: &[f64; 2]| stop > z[0] - margin && stop < z[1];
+                let inside = if every_lane {
+                    self.morph.zones_on(self.ego_lane).find(blocks)
+                } else {
+                    self.conflicts
+                        .pairs()
+                        .iter()
+                        .map(|c| [s + c.ego_zone_m[0], s + c.ego_zone_m[1]])
+                        .find(blocks)
+                };
+                let Some(z) = inside else {
+                    break;
+                };
+                stop = if stoppable(z[0] - margin) {
+                    z[0] - margin
+                } else {
+                    f64::INFINITY
+                };
             }
-        }
-        if stop > s {
-            stop - s
+            stop
+        };
+        let first = settle(stop, true);
+        let every_lane = first.is_finite() || !stop.is_finite();
+        stop = if every_lane {
+            first
         } else {
-            f64::INFINITY
+            settle(stop, false)
+        };
+        if !stop.is_finite() {
+            return (f64::INFINITY, f64::INFINITY, true);
         }
+        // Zones beginning before it has cleared extend what it must clear.
+        loop {
+            let further = self
+                .morph
+                .zones_on(self.ego_lane)
+                .filter(|z| z[0] >= stop && z[0] < clear)
+                .fold(clear, |c, z| c.max(z[1]));
+            if further <= clear {
+                break;
+            }
+            clear = further;
+        }
+        (stop - s, clear - s, every_lane)
     }
 
-    /// Distance to clear the nearest conflict zone ahead, else the reference distance.
+    /// Distance through the nearest conflict zone ahead that a road user is in conflict
+    /// with, else the reference distance.
     fn goal_distance(&self) -> f64 {
         let p = &self.params;
         let exit = self
             .conflicts
             .pairs()
             .iter()
-            .map(|c| c.ego_dist_m + clear_past_m(p))
+            .map(|c: &ConflictPair| c.ego_zone_m[1])
             .filter(|d| *d > 1.0)
             .fold(f64::INFINITY, f64::min);
         if exit.is_finite() {
@@ -459,17 +632,6 @@ impl DecisionCore {
             p.choice.reference_speed_mps * p.trajectory.t_ref_s
         }
     }
-}
-
-/// How far before a conflict point a yielding ego stops, m: half the conflict zone, the stop
-/// margin and half the car.
-fn stop_before_m(p: &Params) -> f64 {
-    p.opm.conflict_zone_half_m + p.trajectory.stop_margin_m + 0.5 * p.trajectory.vehicle_length_m
-}
-
-/// How far past a conflict point the ego has cleared its zone, m: half the zone and the car.
-fn clear_past_m(p: &Params) -> f64 {
-    p.opm.conflict_zone_half_m + p.trajectory.vehicle_length_m
 }
 
 /// Samples around `profile` and runs the Monte Carlo search.
@@ -487,20 +649,24 @@ fn plan(
 }
 
 /// The ego's Frenet state on its lane; acceleration is clamped to the planning limits so that
-/// every plan starts from a feasible state.
+/// every plan starts from a feasible state: braking is at most what the jerk limit can release
+/// before the speed reaches zero, √(2·j_max·v) (a standing car does not decelerate).
 fn frenet_start(ego: &AgentState, lane: &Lane, p: &Params) -> FrenetState {
     let f = lane.project(ego.pos);
     let t = Vec2::from_angle(f.tangent);
     let n = Vec2::new(-t.y, t.x);
     let dir = ego.direction();
     let speed = ego.speed();
-    let a_lon = ego
-        .longitudinal_accel()
-        .clamp(-p.trajectory.max_brake_mps2, p.trajectory.max_accel_mps2);
+    let ds = flush(speed * dir.dot(t));
+    let releasable = libm::sqrt(2.0 * p.trajectory.max_jerk_mps3 * ds.max(0.0));
+    let a_lon = (ego.longitudinal_accel() * dir.dot(t)).clamp(
+        -p.trajectory.max_brake_mps2.min(releasable),
+        p.trajectory.max_accel_mps2,
+    );
     FrenetState {
         s: f.s,
-        ds: flush(speed * dir.dot(t)),
-        dds: flush(a_lon * dir.dot(t)),
+        ds,
+        dds: flush(a_lon),
         l: flush(f.l),
         dl: flush(speed * dir.dot(n)),
         ddl: 0.0,

@@ -2,9 +2,11 @@
 //! C(vᵢ, vⱼ, ΔTTC) (eq. 4), intent pairs I(vᵢ, vⱼ), relations 𝓡 (eq. 5) and the triplet
 //! T = (𝓞, 𝓟, 𝓡) (eq. 6) in a fixed-size form.
 
-use crate::params::OpmParams;
+use crate::intent::{self, ImplicitIntent, Motion};
+use crate::params::{InteractionParams, OpmParams};
 use crate::scene::{
-    AgentKind, AgentState, ExplicitIntent, Morphology, ProcessState, Scene, Vec2, MAX_AGENTS,
+    AgentKind, AgentState, ConflictKind, ExplicitIntent, History, Morphology, ProcessState,
+    RightOfWay, Scene, Vec2, MAX_AGENTS,
 };
 
 /// Most objects the triplet keeps.
@@ -40,6 +42,23 @@ pub struct ConflictPair {
     pub delta_ttc_s: f64,
     /// Arc length of the point on the ego's lane, m.
     pub ego_point_s: f64,
+    pub kind: ConflictKind,
+    /// The ego's conflict zone (where its footprint is in the agent's lane) as distances from
+    /// its centre along its lane, [enter, exit], m (negative once passed).
+    pub ego_zone_m: [f64; 2],
+    /// The agent's conflict zone, distances from its centre along its lane, m.
+    pub agent_zone_m: [f64; 2],
+    /// The ego's and the agent's passages, whose occupancy times give the PET, m (see
+    /// `ConflictPoint::pass_a`).
+    pub ego_pass_m: [f64; 2],
+    pub agent_pass_m: [f64; 2],
+    /// Right of way: `A` the ego, `B` the agent.
+    pub right_of_way: RightOfWay,
+    /// The agent's speed, m/s, and the acceleration its motion shows, m/s².
+    pub agent_speed_mps: f64,
+    pub agent_accel_mps2: f64,
+    /// The agent's implicit intent towards the ego's path, fused with its stated one.
+    pub intent: ImplicitIntent,
 }
 
 impl ConflictPair {
@@ -142,6 +161,14 @@ impl Default for ConflictSet {
 }
 
 impl ConflictSet {
+    /// A set of `pairs` (the first [`MAX_AGENTS`] of them).
+    pub fn of(pairs: &[ConflictPair]) -> Self {
+        let mut set = ConflictSet::default();
+        for c in pairs {
+            set.push(*c);
+        }
+        set
+    }
     pub fn pairs(&self) -> &[ConflictPair] {
         &self.pairs[..self.n]
     }
@@ -164,13 +191,17 @@ struct Candidate {
     conflict: Option<ConflictPair>,
 }
 
-/// Builds the triplet of `scene` into `out` (object selection of §3.1 and eq. 4–6).
-/// `processes` holds P_ti of every agent, in scene order; `all` receives every conflict pair.
+/// Builds the triplet of `scene` into `out` (object selection of §3.1 and eq. 4–6, implicit
+/// intents of §4.1). `processes` holds P_ti of every agent, in scene order, and `history` their
+/// tracks; `all` receives every conflict pair.
+#[allow(clippy::too_many_arguments)]
 pub fn build(
     scene: &Scene,
     morph: &Morphology,
     p: &OpmParams,
+    ip: &InteractionParams,
     processes: &[ProcessState; MAX_AGENTS],
+    history: &History,
     out: &mut OpmTriplet,
     all: &mut ConflictSet,
 ) {
@@ -216,26 +247,45 @@ pub fn build(
         let conflict = process
             .lane
             .filter(|&l| l != ego_lane_id)
-            .and_then(|l| morph.conflict_between(ego_lane_id, l))
-            .and_then(|(s_e, s_a)| {
-                let d_e = s_e - ego_f.s;
-                let d_a = s_a - process.s_m;
-                if d_e < -p.conflict_zone_half_m || d_a < -p.conflict_zone_half_m {
+            .and_then(|l| morph.conflict(ego_lane_id, l))
+            .and_then(|cp| {
+                let rel = |s: f64| s - ego_f.s;
+                let own = |s: f64| s - process.s_m;
+                let ego_zone = cp.zone_a.map(rel);
+                let agent_zone = cp.zone_b.map(own);
+                if ego_zone[1] < 0.0 || agent_zone[1] < 0.0 {
                     return None;
                 }
+                let (d_e, d_a) = (rel(cp.s_a), own(cp.s_b));
                 let (te, ta) = (
                     guarded_ttc(d_e, ego_speed, p),
                     guarded_ttc(d_a, process.speed_mps, p),
                 );
+                let motion = Motion::of(agent, history.track(agent.id), scene.time_s, ip);
                 Some(ConflictPair {
                     agent: i as u8,
-                    point: ego_lane.pose_at(s_e, 0).0,
+                    point: ego_lane.pose_at(cp.s_a, 0).0,
                     ego_dist_m: d_e,
                     agent_dist_m: d_a,
                     ego_ttc_s: te,
                     agent_ttc_s: ta,
                     delta_ttc_s: (te - ta).abs(),
-                    ego_point_s: s_e,
+                    ego_point_s: cp.s_a,
+                    kind: cp.kind,
+                    ego_zone_m: ego_zone,
+                    agent_zone_m: agent_zone,
+                    ego_pass_m: cp.pass_a.map(rel),
+                    agent_pass_m: cp.pass_b.map(own),
+                    right_of_way: cp.right_of_way,
+                    agent_speed_mps: motion.speed,
+                    agent_accel_mps2: motion.accel,
+                    intent: intent::infer(
+                        &motion,
+                        agent_zone[0],
+                        &agent.intent,
+                        p.intent_confidence_min,
+                        ip,
+                    ),
                 })
             });
         if let Some(c) = conflict {

@@ -14,6 +14,7 @@ pub struct Params {
     pub opm: OpmParams,
     pub saliency: SaliencyParams,
     pub choice: ChoiceParams,
+    pub interaction: InteractionParams,
     pub advice: AdviceParams,
     pub trajectory: TrajectoryParams,
 }
@@ -79,9 +80,11 @@ pub struct ChoiceParams {
     /// Penalty on a turn against the navigation instruction (matching degree).
     pub navigation_penalty: f64,
     /// Penalty on waiting without a reason (matching degree): a maneuver that keeps a stopped
-    /// ego standing when it yields to nothing and no leader holds it back. Without it the
-    /// history terms of eq. 12–14 can keep a stopped ego in "decelerate" once the last
-    /// conflict is gone, since its scene state, and so D_prev, no longer changes.
+    /// ego standing, or yielding, when no leader holds it back and nothing requires it: no
+    /// conflict to yield to, or every conflicting road user lets it go (a maneuver of its route
+    /// is free of risk and imposes nothing). Without it the history terms of eq. 12–14 keep a
+    /// stopped ego in "decelerate" once the reason to wait is gone, since its scene state, and
+    /// so D_prev, no longer changes.
     pub idle_penalty: f64,
     /// Gain of the IDM car-following penalty, per m/s² of excess acceleration.
     pub idm_penalty_gain: f64,
@@ -151,6 +154,75 @@ impl Default for ChoiceParams {
             other_proceeds_safety: 0.4,
             other_yields_efficiency: 0.4,
             conflict_intensity_safety: 0.1,
+        }
+    }
+}
+
+/// Interaction with the road users the ego conflicts with: implicit intents, post-encroachment
+/// margins, right of way, courtesy and deadlock negotiation (`intent`, `choice`, the core's
+/// negotiation).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InteractionParams {
+    /// Below this speed a road user stands still, m/s.
+    pub standing_speed_mps: f64,
+    /// Deceleration a road user (and the ego) can brake comfortably at, m/s²: one that would
+    /// need more to stop before its conflict zone is committed.
+    pub comfort_decel_mps2: f64,
+    /// Yield probability of a road user standing still before its conflict zone.
+    pub standing_yield: f64,
+    /// Acceleration of a road user that proceeds from its current state, m/s² (the earliest
+    /// it may arrive: its current acceleration if higher).
+    pub proceed_accel_mps2: f64,
+    /// Slowest speed at which a proceeding road user crosses, m/s (its latest exit).
+    pub proceed_min_speed_mps: f64,
+    /// Post-encroachment margin the ego needs to go first, before another road user's
+    /// proceeding occupancy of the conflict zone, s.
+    pub pet_go_s: f64,
+    /// Margin the ego needs to pass behind another road user that will have left, s.
+    pub pet_behind_s: f64,
+    /// A plan that would make another road user brake harder than this to keep `pet_behind_s`
+    /// behind the ego is not taken, m/s².
+    pub max_imposed_decel_mps2: f64,
+    /// Time another road user takes to react to the ego before braking, s.
+    pub reaction_s: f64,
+    /// Yield probability from which the planner predicts a road user stopping before its zone
+    /// instead of driving on.
+    pub trust_yield: f64,
+    /// Waiting for a road user that itself waits is expected to last this long, s (the cost
+    /// of a deadlock in the efficiency degree).
+    pub deadlock_wait_s: f64,
+    /// Both the ego and another road user below this speed before their zones: waiting or
+    /// creeping, m/s.
+    pub creep_speed_mps: f64,
+    /// Both waiting this long: the ego announces on the eHMI that it goes first, s.
+    pub deadlock_after_s: f64,
+    /// After announcing, the ego watches the other for this long (a reaction time) and goes if
+    /// it keeps waiting, s.
+    pub watch_s: f64,
+    /// Utility penalty of a maneuver rejected for courtesy (kept finite so the logit stays
+    /// defined; large enough that it is never chosen over one that is not rejected).
+    pub courtesy_penalty: f64,
+}
+
+impl Default for InteractionParams {
+    fn default() -> Self {
+        Self {
+            standing_speed_mps: 0.5,
+            comfort_decel_mps2: 3.0,
+            standing_yield: 0.7,
+            proceed_accel_mps2: 1.5,
+            proceed_min_speed_mps: 2.0,
+            pet_go_s: 2.0,
+            pet_behind_s: 1.6,
+            max_imposed_decel_mps2: 3.0,
+            reaction_s: 0.5,
+            trust_yield: 0.8,
+            deadlock_wait_s: 5.0,
+            creep_speed_mps: 1.0,
+            deadlock_after_s: 0.5,
+            watch_s: 1.0,
+            courtesy_penalty: 10.0,
         }
     }
 }

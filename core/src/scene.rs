@@ -452,6 +452,9 @@ pub struct Lane {
     pub stop_s: f64,
     /// Turn through the junction.
     pub turn: Turn,
+    /// Right-of-way level at the junction: where two lanes cross or merge, the higher level
+    /// goes first (equal levels: [`JunctionRule`]).
+    pub priority: u8,
 }
 
 /// Why a lane or morphology could not be built.
@@ -491,6 +494,7 @@ impl Lane {
             half_width,
             stop_s,
             turn,
+            priority: 0,
         };
         lane.points[..points.len()].copy_from_slice(points);
         for i in 1..points.len() {
@@ -518,6 +522,12 @@ impl Lane {
             lane.kappa[i] = 2.0 * area2 / denom;
         }
         Ok(lane)
+    }
+
+    /// The lane with right-of-way level `level`.
+    pub fn with_priority(mut self, level: u8) -> Self {
+        self.priority = level;
+        self
     }
 
     /// Builder for polylines made of straight runs and circular arcs.
@@ -680,8 +690,57 @@ impl LaneBuilder {
     }
 }
 
-/// Where two lane reference lines cross or merge.
-#[derive(Clone, Copy, Debug, PartialEq)]
+coded_enum! {
+/// How two lanes meet at a conflict point.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ConflictKind {
+    /// The lanes cross: each is in the other's path only around the point.
+    #[default]
+    Crossing = 0,
+    /// The lanes join and go on as one: past the point the two cars follow each other.
+    Merging = 1,
+}
+}
+
+coded_enum! {
+/// Which lane of a conflict point has the right of way.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum RightOfWay {
+    /// Neither: equal priority, first come first served.
+    #[default]
+    Neither = 0,
+    A = 1,
+    B = 2,
+}
+}
+
+coded_enum! {
+/// How a junction resolves two lanes of equal priority level.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum JunctionRule {
+    /// Levels alone decide; at equal levels neither lane has the right of way.
+    #[default]
+    Levels = 0,
+    /// At equal levels the lane coming from the right goes first (in the counter-clockwise
+    /// frame: x east, y north; a mirrored frame such as highway-env's would swap the sides).
+    RightBeforeLeft = 1,
+}
+}
+
+/// Footprint, length × width in m, for which [`Morphology::new`] derives conflict zones; the
+/// core refits them to its own (`Morphology::fit_footprint`).
+pub const DEFAULT_FOOTPRINT_M: [f64; 2] = [4.8, 2.0];
+/// Step of the scan for a conflict zone's ends, m (the ends are then bisected to ~1 mm).
+const ZONE_STEP_M: f64 = 1.0;
+/// How far from the conflict point the scan for a zone's ends looks, m.
+const ZONE_SCAN_M: f64 = 40.0;
+/// Lanes whose centre lines are still within each other's band this far past their first
+/// contact merge, m.
+const MERGE_CHECK_M: f64 = 20.0;
+
+/// Where two lane reference lines cross or merge, with the stretch of each lane where a
+/// vehicle is in the other's path.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ConflictPoint {
     pub lane_a: u8,
     pub lane_b: u8,
@@ -690,6 +749,134 @@ pub struct ConflictPoint {
     /// Arc length of the point on lane b, m.
     pub s_b: f64,
     pub pos: Vec2,
+    pub kind: ConflictKind,
+    /// Conflict zone on lane a: the centre arc lengths [enter, exit] between which a footprint
+    /// centred on lane a overlaps lane b's band (its centre line ± half-width), m. At a merge,
+    /// exit is one footprint length past the point, where the car is wholly on the joint lane.
+    pub zone_a: [f64; 2],
+    /// The same on lane b against lane a's band, m.
+    pub zone_b: [f64; 2],
+    /// Passage on lane a, centre arc lengths [enter, exit], m: the stretch whose occupancy
+    /// times give the post-encroachment time. At a crossing it is the zone; at a merge the
+    /// footprint passing the point, where the two cars' order is settled.
+    pub pass_a: [f64; 2],
+    /// The same on lane b, m.
+    pub pass_b: [f64; 2],
+    pub right_of_way: RightOfWay,
+}
+
+impl ConflictPoint {
+    /// The point seen from `lane`: lane a is `lane` (a and b swapped when needed).
+    pub fn seen_from(&self, lane: u8) -> ConflictPoint {
+        if self.lane_a == lane {
+            return *self;
+        }
+        ConflictPoint {
+            lane_a: self.lane_b,
+            lane_b: self.lane_a,
+            s_a: self.s_b,
+            s_b: self.s_a,
+            pos: self.pos,
+            kind: self.kind,
+            zone_a: self.zone_b,
+            zone_b: self.zone_a,
+            pass_a: self.pass_b,
+            pass_b: self.pass_a,
+            right_of_way: match self.right_of_way {
+                RightOfWay::A => RightOfWay::B,
+                RightOfWay::B => RightOfWay::A,
+                RightOfWay::Neither => RightOfWay::Neither,
+            },
+        }
+    }
+}
+
+/// True when a `footprint` (length × width, m) centred on `a`'s reference line at arc length
+/// `s` overlaps `b`'s band: some point of a 5 × 3 grid over the rectangle (spacing a quarter
+/// length by half a width) lies within b's half-width of its centre line and within its
+/// extent. A band narrower than the grid spacing (¼ length) could slip between grid points;
+/// lanes are wider. `near_s` (b's arc length of the conflict point) bounds the projection.
+fn footprint_overlaps(a: &Lane, s: f64, b: &Lane, near_s: f64, footprint: [f64; 2]) -> bool {
+    let (p, tangent, _) = a.pose_at(s, 0);
+    let f = Vec2::from_angle(tangent);
+    let n = Vec2::new(-f.y, f.x);
+    let reach = ZONE_SCAN_M + footprint[0];
+    let first = b.segment_at(near_s - reach, 0);
+    let last = b.segment_at(near_s + reach, first) + 1;
+    for i in 0..5 {
+        for j in 0..3 {
+            let along = footprint[0] * (i as f64 / 4.0 - 0.5);
+            let across = footprint[1] * (j as f64 / 2.0 - 0.5);
+            let q = p.plus(f.scale(along)).plus(n.scale(across));
+            let fr = b.project_range(q, first, last);
+            if fr.s >= 0.0 && fr.s <= b.length() && fr.l.abs() <= b.half_width {
+                return true;
+            }
+        }
+    }
+    false
+}
+
+/// Conflict zone on `a` around its point `s_a` (b's arc length `s_b`) for `footprint`, and
+/// whether the lanes merge: b's band still holds a's centre [`MERGE_CHECK_M`] past the point
+/// (or at a's end). See [`ConflictPoint::zone_a`].
+fn zone_on(a: &Lane, s_a: f64, b: &Lane, s_b: f64, footprint: [f64; 2]) -> ([f64; 2], bool) {
+    let inside = |s: f64| footprint_overlaps(a, s, b, s_b, footprint);
+    let bisect = |mut inn: f64, mut out: f64| {
+        for _ in 0..10 {
+            let mid = 0.5 * (inn + out);
+            if inside(mid) {
+                inn = mid;
+            } else {
+                out = mid;
+            }
+        }
+        inn
+    };
+    let lowest = (s_a - ZONE_SCAN_M).max(-0.5 * footprint[0]);
+    let mut s = s_a;
+    while s - ZONE_STEP_M >= lowest && inside(s - ZONE_STEP_M) {
+        s -= ZONE_STEP_M;
+    }
+    let enter = if s - ZONE_STEP_M < lowest {
+        lowest
+    } else {
+        bisect(s, s - ZONE_STEP_M)
+    };
+    let later = (s_a + MERGE_CHECK_M).min(a.length());
+    let f = b.project(a.pose_at(later, 0).0);
+    if later > s_a && f.s >= 0.0 && f.s <= b.length() + 1e-6 && f.l.abs() <= b.half_width {
+        return ([enter, s_a + footprint[0]], true);
+    }
+    let mut s = s_a;
+    while s + ZONE_STEP_M <= s_a + ZONE_SCAN_M && inside(s + ZONE_STEP_M) {
+        s += ZONE_STEP_M;
+    }
+    ([enter, bisect(s, s + ZONE_STEP_M)], false)
+}
+
+/// Right of way between lanes `a` and `b` at their point (arc lengths `s_a`, `s_b`).
+fn right_of_way(a: &Lane, s_a: f64, b: &Lane, s_b: f64, rule: JunctionRule) -> RightOfWay {
+    match a.priority.cmp(&b.priority) {
+        core::cmp::Ordering::Greater => RightOfWay::A,
+        core::cmp::Ordering::Less => RightOfWay::B,
+        core::cmp::Ordering::Equal => match rule {
+            JunctionRule::Levels => RightOfWay::Neither,
+            JunctionRule::RightBeforeLeft => {
+                // b comes from a's right when it heads to a's left: t_a × t_b > 0.
+                let ta = Vec2::from_angle(a.pose_at(s_a, 0).1);
+                let tb = Vec2::from_angle(b.pose_at(s_b, 0).1);
+                let c = ta.cross(tb);
+                if c > 0.1 {
+                    RightOfWay::B
+                } else if c < -0.1 {
+                    RightOfWay::A
+                } else {
+                    RightOfWay::Neither
+                }
+            }
+        },
+    }
 }
 
 /// Built-in geometries.
@@ -709,6 +896,11 @@ pub enum BuiltIn {
 }
 
 /// Lane indices of [`BuiltIn::PaperIntersection`].
+///
+/// Priority levels, as in highway-env's intersection: the east–west road is the major road
+/// (straight and right turns 3, left turns 2), the north–south road the minor one (straight 1);
+/// so the CAV's left turn gives way to the oncoming HDV and has the right of way over the
+/// minor road.
 pub mod paper {
     /// Westbound from (40, 5), turning left to southbound: the CAV's route.
     pub const CAV_LEFT: u8 = 0;
@@ -728,7 +920,7 @@ pub mod paper {
     pub const EAST_RIGHT: u8 = 7;
 }
 
-/// Lane indices of [`BuiltIn::Merge`].
+/// Lane indices of [`BuiltIn::Merge`]; the main lane has priority level 1, the ramp 0.
 pub mod merge {
     /// Main carriageway, eastbound along y = 0 from x = −150.
     pub const MAIN: u8 = 0;
@@ -757,6 +949,12 @@ pub mod merge {
 /// On an approach shared by several movements, an agent matches the movement its turn signal
 /// shows (see [`Morphology::match_lane`]); without a signal, the one with the lowest index,
 /// so straight movements come first.
+///
+/// Priority levels are highway-env's (`_make_road`, resolved by its `RegulatedRoad`): the
+/// east–west road 3 (its left turns 2), the north–south road 1 (its left turns 0), each
+/// movement at the level of its lane through the junction; at equal levels highway-env lets
+/// the car behind yield, i.e. first come first served ([`JunctionRule::Levels`]). The ego's
+/// left turn (0) gives way to every crossing movement.
 pub mod highway_env_intersection {
     /// Lane width, m (`AbstractLane.DEFAULT_WIDTH`).
     pub const LANE_WIDTH_M: f64 = 4.0;
@@ -817,7 +1015,8 @@ pub mod highway_env_intersection {
 /// with the ego's lane is the end of the taper, (250, 4). The sine section is sampled as
 /// chords 5 m apart (they stay within 2 cm of the curve). A ramp car still waiting on the
 /// auxiliary lane beyond the taper matches no lane. On the joint part of the ramp and the
-/// ego's lane an agent matches the ego's lane (the lower index).
+/// ego's lane an agent matches the ego's lane (the lower index). The main lanes have priority
+/// level 1, the ramp 0 (highway-env's merging car changes lanes only into a gap).
 pub mod highway_env_merge {
     /// Lane width, m (`AbstractLane.DEFAULT_WIDTH`).
     pub const LANE_WIDTH_M: f64 = 4.0;
@@ -856,19 +1055,28 @@ pub mod highway_env_merge {
     pub const LANES: usize = 3;
 }
 
-/// Intersection morphology 𝓘 = {P_stop, R_lane, L_ref} (eq. 2) with its conflict points.
+/// Intersection morphology 𝓘 = {P_stop, R_lane, L_ref} (eq. 2) with its conflict points,
+/// their zones and right of way.
 #[derive(Clone, Copy, Debug)]
 pub struct Morphology {
     lanes: [Lane; MAX_LANES],
     n_lanes: usize,
     conflicts: [ConflictPoint; MAX_CONFLICTS],
     n_conflicts: usize,
+    rule: JunctionRule,
+    footprint: [f64; 2],
 }
 
 impl Morphology {
     /// Builds a morphology and finds every conflict point between lanes that do not share
-    /// their start (lanes of one approach diverge rather than conflict).
+    /// their start (lanes of one approach diverge rather than conflict); equal priority levels
+    /// are first come first served.
     pub fn new(lanes: &[Lane]) -> Result<Self, GeometryError> {
+        Self::with_rule(lanes, JunctionRule::Levels)
+    }
+
+    /// [`Morphology::new`] with `rule` for equal priority levels.
+    pub fn with_rule(lanes: &[Lane], rule: JunctionRule) -> Result<Self, GeometryError> {
         if lanes.is_empty() {
             return Err(GeometryError::TooFewPoints);
         }
@@ -878,14 +1086,10 @@ impl Morphology {
         let mut m = Morphology {
             lanes: [lanes[0]; MAX_LANES],
             n_lanes: lanes.len(),
-            conflicts: [ConflictPoint {
-                lane_a: 0,
-                lane_b: 0,
-                s_a: 0.0,
-                s_b: 0.0,
-                pos: Vec2::ZERO,
-            }; MAX_CONFLICTS],
+            conflicts: [ConflictPoint::default(); MAX_CONFLICTS],
             n_conflicts: 0,
+            rule,
+            footprint: DEFAULT_FOOTPRINT_M,
         };
         m.lanes[..lanes.len()].copy_from_slice(lanes);
         for a in 0..lanes.len() {
@@ -903,12 +1107,46 @@ impl Morphology {
                         s_a,
                         s_b,
                         pos,
+                        right_of_way: right_of_way(&lanes[a], s_a, &lanes[b], s_b, rule),
+                        ..ConflictPoint::default()
                     };
                     m.n_conflicts += 1;
                 }
             }
         }
+        m.derive_zones();
         Ok(m)
+    }
+
+    /// Derives every conflict zone again for a vehicle footprint of `length_m` × `width_m`.
+    pub fn fit_footprint(&mut self, length_m: f64, width_m: f64) {
+        if self.footprint != [length_m, width_m] {
+            self.footprint = [length_m, width_m];
+            self.derive_zones();
+        }
+    }
+
+    fn derive_zones(&mut self) {
+        for c in self.conflicts[..self.n_conflicts].iter_mut() {
+            let (a, b) = (
+                &self.lanes[c.lane_a as usize],
+                &self.lanes[c.lane_b as usize],
+            );
+            let (zone_a, merge_a) = zone_on(a, c.s_a, b, c.s_b, self.footprint);
+            let (zone_b, merge_b) = zone_on(b, c.s_b, a, c.s_a, self.footprint);
+            c.zone_a = zone_a;
+            c.zone_b = zone_b;
+            let half = 0.5 * self.footprint[0];
+            (c.kind, c.pass_a, c.pass_b) = if merge_a || merge_b {
+                (
+                    ConflictKind::Merging,
+                    [c.s_a - half, c.s_a + half],
+                    [c.s_b - half, c.s_b + half],
+                )
+            } else {
+                (ConflictKind::Crossing, zone_a, zone_b)
+            };
+        }
     }
 
     /// One of the built-in geometries.
@@ -920,6 +1158,16 @@ impl Morphology {
             BuiltIn::HighwayEnvMerge => Morphology::new(&highway_env_merge_lanes()),
         }
         .expect("built-in geometries are valid")
+    }
+
+    /// How equal priority levels are resolved.
+    pub fn rule(&self) -> JunctionRule {
+        self.rule
+    }
+
+    /// The footprint the conflict zones are derived for, [length, width] in m.
+    pub fn footprint(&self) -> [f64; 2] {
+        self.footprint
     }
 
     pub fn lanes(&self) -> &[Lane] {
@@ -934,15 +1182,23 @@ impl Morphology {
 
     /// Conflict point between lanes `a` and `b`, as (s on a, s on b).
     pub fn conflict_between(&self, a: u8, b: u8) -> Option<(f64, f64)> {
-        self.conflicts().iter().find_map(|c| {
-            if c.lane_a == a && c.lane_b == b {
-                Some((c.s_a, c.s_b))
-            } else if c.lane_a == b && c.lane_b == a {
-                Some((c.s_b, c.s_a))
-            } else {
-                None
-            }
-        })
+        self.conflict(a, b).map(|c| (c.s_a, c.s_b))
+    }
+
+    /// The conflict point between lanes `a` and `b`, seen from `a`.
+    pub fn conflict(&self, a: u8, b: u8) -> Option<ConflictPoint> {
+        self.conflicts()
+            .iter()
+            .find(|c| (c.lane_a, c.lane_b) == (a, b) || (c.lane_a, c.lane_b) == (b, a))
+            .map(|c| c.seen_from(a))
+    }
+
+    /// Conflict zones on `lane` against every other lane, as centre arc lengths [enter, exit].
+    pub fn zones_on(&self, lane: u8) -> impl Iterator<Item = [f64; 2]> + '_ {
+        self.conflicts()
+            .iter()
+            .filter(move |c| c.lane_a == lane || c.lane_b == lane)
+            .map(move |c| c.seen_from(lane).zone_a)
     }
 
     /// Lane that best explains an agent's pose: within the lane boundary and heading within
@@ -1026,7 +1282,11 @@ fn paper_lanes() -> [Lane; 8] {
     let v = Vec2::new;
     let hw = PAPER_HALF_WIDTH_M;
     // Approaches run 40 m to the junction box |x|, |y| ≤ 10; stop lines at its edge (s = 30).
-    let lane = |b: LaneBuilder, turn| b.build(hw, 30.0, turn).expect("valid built-in lane");
+    let lane = |b: LaneBuilder, turn, level| {
+        b.build(hw, 30.0, turn)
+            .expect("valid built-in lane")
+            .with_priority(level)
+    };
     [
         lane(
             Lane::builder(v(40.0, 5.0))
@@ -1034,14 +1294,17 @@ fn paper_lanes() -> [Lane; 8] {
                 .arc(v(5.0, -5.0), FRAC_PI_2, ARC_STEP_M)
                 .line_to(v(-5.0, -40.0)),
             Turn::Left,
+            2,
         ),
         lane(
             Lane::builder(v(-40.0, -5.0)).line_to(v(40.0, -5.0)),
             Turn::Straight,
+            3,
         ),
         lane(
             Lane::builder(v(40.0, 5.0)).line_to(v(-40.0, 5.0)),
             Turn::Straight,
+            3,
         ),
         lane(
             Lane::builder(v(-40.0, -5.0))
@@ -1049,14 +1312,17 @@ fn paper_lanes() -> [Lane; 8] {
                 .arc(v(-5.0, 5.0), FRAC_PI_2, ARC_STEP_M)
                 .line_to(v(5.0, 40.0)),
             Turn::Left,
+            2,
         ),
         lane(
             Lane::builder(v(5.0, -40.0)).line_to(v(5.0, 40.0)),
             Turn::Straight,
+            1,
         ),
         lane(
             Lane::builder(v(-5.0, 40.0)).line_to(v(-5.0, -40.0)),
             Turn::Straight,
+            1,
         ),
         lane(
             Lane::builder(v(40.0, 5.0))
@@ -1064,6 +1330,7 @@ fn paper_lanes() -> [Lane; 8] {
                 .arc(v(10.0, 10.0), -FRAC_PI_2, ARC_STEP_M)
                 .line_to(v(5.0, 40.0)),
             Turn::Right,
+            3,
         ),
         lane(
             Lane::builder(v(-40.0, -5.0))
@@ -1071,6 +1338,7 @@ fn paper_lanes() -> [Lane; 8] {
                 .arc(v(-10.0, -10.0), -FRAC_PI_2, ARC_STEP_M)
                 .line_to(v(-5.0, -40.0)),
             Turn::Right,
+            3,
         ),
     ]
 }
@@ -1086,9 +1354,10 @@ fn highway_env_intersection_lanes() -> [Lane; highway_env_intersection::LANES] {
     // near corner: (±(r − 2), ±(r − 2)) = (±11, ±11) for both radii.
     let (cl, cr) = (r_left - h, r_right + h);
     // Stop lines where the approaches end (highway-env has none; its junction begins there).
-    let lane = |b: LaneBuilder, turn| {
+    let lane = |b: LaneBuilder, turn, level| {
         b.build(0.5 * LANE_WIDTH_M, APPROACH_M, turn)
             .expect("valid built-in lane")
+            .with_priority(level)
     };
     // A driver's left turn is a clockwise (negative) sweep in highway-env's y-down frame.
     let left = -FRAC_PI_2;
@@ -1101,11 +1370,13 @@ fn highway_env_intersection_lanes() -> [Lane; highway_env_intersection::LANES] {
                 .arc(v(-cl, cl), left, ARC_STEP_M)
                 .line_to(v(-far, -h)),
             Turn::Left,
+            0,
         ),
         // NORTH_STRAIGHT: o2 → ir2 → il0 → o0.
         lane(
             Lane::builder(v(-h, -far)).line_to(v(-h, far)),
             Turn::Straight,
+            1,
         ),
         // NORTH_RIGHT: o2 → ir2 → il1 → o1.
         lane(
@@ -1114,6 +1385,7 @@ fn highway_env_intersection_lanes() -> [Lane; highway_env_intersection::LANES] {
                 .arc(v(-cr, -cr), right, ARC_STEP_M)
                 .line_to(v(-far, -h)),
             Turn::Right,
+            1,
         ),
         // NORTH_LEFT: o2 → ir2 → il3 → o3.
         lane(
@@ -1122,9 +1394,14 @@ fn highway_env_intersection_lanes() -> [Lane; highway_env_intersection::LANES] {
                 .arc(v(cl, -cl), left, ARC_STEP_M)
                 .line_to(v(far, h)),
             Turn::Left,
+            0,
         ),
         // WEST_STRAIGHT: o1 → ir1 → il3 → o3.
-        lane(Lane::builder(v(-far, h)).line_to(v(far, h)), Turn::Straight),
+        lane(
+            Lane::builder(v(-far, h)).line_to(v(far, h)),
+            Turn::Straight,
+            3,
+        ),
         // WEST_LEFT: o1 → ir1 → il2 → o2.
         lane(
             Lane::builder(v(-far, h))
@@ -1132,11 +1409,13 @@ fn highway_env_intersection_lanes() -> [Lane; highway_env_intersection::LANES] {
                 .arc(v(-cl, -cl), left, ARC_STEP_M)
                 .line_to(v(h, -far)),
             Turn::Left,
+            2,
         ),
         // EAST_STRAIGHT: o3 → ir3 → il1 → o1.
         lane(
             Lane::builder(v(far, -h)).line_to(v(-far, -h)),
             Turn::Straight,
+            3,
         ),
         // EAST_LEFT: o3 → ir3 → il0 → o0.
         lane(
@@ -1145,6 +1424,7 @@ fn highway_env_intersection_lanes() -> [Lane; highway_env_intersection::LANES] {
                 .arc(v(cl, cl), left, ARC_STEP_M)
                 .line_to(v(-h, far)),
             Turn::Left,
+            2,
         ),
         // WEST_RIGHT: o1 → ir1 → il0 → o0.
         lane(
@@ -1153,6 +1433,7 @@ fn highway_env_intersection_lanes() -> [Lane; highway_env_intersection::LANES] {
                 .arc(v(-cr, cr), right, ARC_STEP_M)
                 .line_to(v(-h, far)),
             Turn::Right,
+            3,
         ),
         // EAST_RIGHT: o3 → ir3 → il2 → o2.
         lane(
@@ -1161,6 +1442,7 @@ fn highway_env_intersection_lanes() -> [Lane; highway_env_intersection::LANES] {
                 .arc(v(cr, -cr), right, ARC_STEP_M)
                 .line_to(v(h, -far)),
             Turn::Right,
+            3,
         ),
     ]
 }
@@ -1179,6 +1461,7 @@ fn highway_env_merge_lanes() -> [Lane; highway_env_merge::LANES] {
             .line_to(v(ROAD_END_M, y))
             .build(hw, JOIN_M, Turn::Straight)
             .expect("valid built-in lane")
+            .with_priority(1)
     };
     let amplitude = 0.5 * (RAMP_Y_M - AUX_Y_M);
     let centre = 0.5 * (RAMP_Y_M + AUX_Y_M);
@@ -1194,7 +1477,8 @@ fn highway_env_merge_lanes() -> [Lane; highway_env_merge::LANES] {
         .line_to(v(JOIN_M, RIGHT_Y_M))
         .line_to(v(ROAD_END_M, RIGHT_Y_M))
         .build(hw, 0.0, Turn::Straight)
-        .expect("valid built-in lane");
+        .expect("valid built-in lane")
+        .with_priority(0);
     // The ramp's stop line is where its taper begins (the start of the auxiliary lane).
     ramp.stop_s = ramp.project(v(AUX_START_M, AUX_Y_M)).s;
     [main(RIGHT_Y_M), main(LEFT_Y_M), ramp]
@@ -1205,6 +1489,7 @@ fn merge_main() -> Lane {
         .line_to(Vec2::new(150.0, 0.0))
         .build(1.8, 150.0, Turn::Straight)
         .expect("valid built-in lane")
+        .with_priority(1)
 }
 
 fn merge_ramp() -> Lane {

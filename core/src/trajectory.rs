@@ -17,7 +17,7 @@ use rand_distr::StandardNormal;
 
 use crate::choice::Profile;
 use crate::params::TrajectoryParams;
-use crate::scene::{AgentState, Lane, Morphology, ProcessState, Vec2, MAX_AGENTS};
+use crate::scene::{AgentState, Lane, Morphology, ProcessState, Vec2, MAX_AGENTS, MAX_CONFLICTS};
 
 /// Most Monte Carlo samples per cycle.
 pub const MAX_SAMPLES: usize = 1024;
@@ -29,6 +29,10 @@ pub const MAX_POINTS: usize = MAX_STEPS + 1;
 pub const MAX_BOXES: usize = 8;
 /// Bins of the curvature speed-cap table.
 pub const VCAP_BINS: usize = 256;
+/// Below this speed at the end of the horizon a candidate stands, m/s.
+const STANDING_MPS: f64 = 0.3;
+/// Most time steps a post-encroachment margin spans on each side.
+pub const MAX_SWEEP_STEPS: usize = 48;
 
 /// s(t) = a₀ + a₁t + a₂t² + a₃t³ + a₄t⁴ (eq. 17).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -146,13 +150,25 @@ pub struct FrenetState {
     pub ddl: f64,
 }
 
-/// Boxes in (s, l) that the ego's reference point may not enter, per time step.
+/// What a point of a candidate meets in the occupancy.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Hit {
+    Free,
+    /// Only a post-encroachment margin around where another road user is or will be.
+    Margin,
+    /// Another road user's footprint (with its clearance).
+    Contact,
+}
+
+/// Boxes in (s, l) that the ego's reference point may not enter, per time step: footprints,
+/// and post-encroachment margins (flagged).
 #[derive(Clone, Copy, Debug)]
 pub struct Occupancy {
     s_lo: [[f64; MAX_BOXES]; MAX_STEPS],
     s_hi: [[f64; MAX_BOXES]; MAX_STEPS],
     l_lo: [[f64; MAX_BOXES]; MAX_STEPS],
     l_hi: [[f64; MAX_BOXES]; MAX_STEPS],
+    margin: [[bool; MAX_BOXES]; MAX_STEPS],
     n: [u8; MAX_STEPS],
     /// Union s-interval of the step's boxes, for whole-step rejection.
     step_lo: [f64; MAX_STEPS],
@@ -167,6 +183,7 @@ impl Default for Occupancy {
             s_hi: [[0.0; MAX_BOXES]; MAX_STEPS],
             l_lo: [[0.0; MAX_BOXES]; MAX_STEPS],
             l_hi: [[0.0; MAX_BOXES]; MAX_STEPS],
+            margin: [[false; MAX_BOXES]; MAX_STEPS],
             n: [0; MAX_STEPS],
             step_lo: [f64::INFINITY; MAX_STEPS],
             step_hi: [f64::NEG_INFINITY; MAX_STEPS],
@@ -183,14 +200,17 @@ impl Occupancy {
         self.step_hi[..steps].fill(f64::NEG_INFINITY);
     }
 
-    /// Adds a box at `step`; when the step is full, it is merged into the box nearest in s.
-    fn add(&mut self, step: usize, s_lo: f64, s_hi: f64, l_lo: f64, l_hi: f64) {
+    /// Adds a box at `step` (`margin`: a post-encroachment margin, not a footprint); when the
+    /// step is full, it is merged into the box nearest in s, a footprint unless both were
+    /// margins.
+    fn add(&mut self, step: usize, s_lo: f64, s_hi: f64, l_lo: f64, l_hi: f64, margin: bool) {
         let k = self.n[step] as usize;
         if k < MAX_BOXES {
             self.s_lo[step][k] = s_lo;
             self.s_hi[step][k] = s_hi;
             self.l_lo[step][k] = l_lo;
             self.l_hi[step][k] = l_hi;
+            self.margin[step][k] = margin;
             self.n[step] += 1;
         } else {
             let mid = 0.5 * (s_lo + s_hi);
@@ -207,6 +227,7 @@ impl Occupancy {
             self.s_hi[step][best] = self.s_hi[step][best].max(s_hi);
             self.l_lo[step][best] = self.l_lo[step][best].min(l_lo);
             self.l_hi[step][best] = self.l_hi[step][best].max(l_hi);
+            self.margin[step][best] &= margin;
         }
         self.step_lo[step] = self.step_lo[step].min(s_lo);
         self.step_hi[step] = self.step_hi[step].max(s_hi);
@@ -218,52 +239,97 @@ impl Occupancy {
         s >= self.step_lo[step] && s <= self.step_hi[step]
     }
 
-    /// True when (s, l) lies in a box of `step`.
+    /// What (s, l) meets at `step`: a footprint before a margin.
     #[inline(always)]
-    pub fn hits(&self, step: usize, s: f64, l: f64) -> bool {
+    pub fn hit(&self, step: usize, s: f64, l: f64) -> Hit {
         if !self.may_hit(step, s) {
-            return false;
+            return Hit::Free;
         }
+        let mut hit = Hit::Free;
         for b in 0..self.n[step] as usize {
             if s >= self.s_lo[step][b]
                 && s <= self.s_hi[step][b]
                 && l >= self.l_lo[step][b]
                 && l <= self.l_hi[step][b]
             {
-                return true;
+                if !self.margin[step][b] {
+                    return Hit::Contact;
+                }
+                hit = Hit::Margin;
             }
         }
-        false
+        hit
     }
 
-    /// Boxes at `step`, as (s_lo, s_hi, l_lo, l_hi).
-    pub fn boxes(&self, step: usize) -> impl Iterator<Item = (f64, f64, f64, f64)> + '_ {
+    /// Boxes at `step`, as (s_lo, s_hi, l_lo, l_hi, margin).
+    pub fn boxes(&self, step: usize) -> impl Iterator<Item = (f64, f64, f64, f64, bool)> + '_ {
         (0..self.n[step] as usize).map(move |b| {
             (
                 self.s_lo[step][b],
                 self.s_hi[step][b],
                 self.l_lo[step][b],
                 self.l_hi[step][b],
+                self.margin[step][b],
             )
         })
     }
 }
 
+/// How the planner expects another road user to move.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Forecast {
+    /// Acceleration along its lane, m/s² (what its motion shows).
+    pub accel: f64,
+    /// It stops this far ahead along its lane, m, braking evenly (∞: it drives on at `accel`).
+    pub stop_in_m: f64,
+    /// Post-encroachment margins kept to it, s: [behind, ahead]. While it is in its passage
+    /// of the conflict zone, the ego may not be where it was up to `behind` s before, nor
+    /// where it will be up to `ahead` s after (0 for road users the ego has no conflict with).
+    pub pet_s: [f64; 2],
+    /// Its passage of the conflict zone, distances [enter, exit] along its lane from where it
+    /// is, m.
+    pub pass_m: [f64; 2],
+}
+
+impl Default for Forecast {
+    fn default() -> Self {
+        Forecast {
+            accel: 0.0,
+            stop_in_m: f64::INFINITY,
+            pet_s: [0.0; 2],
+            pass_m: [f64::INFINITY; 2],
+        }
+    }
+}
+
+impl Forecast {
+    /// Distance covered in `t` s from speed `v`, m, at most `v_top` m/s.
+    pub fn travel(&self, v: f64, t: f64, v_top: f64) -> f64 {
+        if self.stop_in_m.is_finite() {
+            if self.stop_in_m <= 0.0 || v < 1e-6 {
+                return 0.0;
+            }
+            travel(v, -v * v / (2.0 * self.stop_in_m), t, v_top)
+        } else {
+            travel(v, self.accel, t, v_top)
+        }
+    }
+}
+
 /// Predicted pose of an agent `t` s ahead: along its matched lane when it has one, otherwise
-/// straight along its direction of travel; constant acceleration, never reversing, speed at
-/// most `v_max`. Returns (position, heading) and updates the lane-segment `hint`.
+/// straight along its direction of travel; per its `forecast` (never reversing, speed at most
+/// `v_max`). Returns (position, heading) and updates the lane-segment `hint`.
 pub fn predict(
     agent: &AgentState,
     process: &ProcessState,
+    forecast: &Forecast,
     morph: &Morphology,
     t: f64,
     v_max: f64,
     hint: &mut usize,
 ) -> (Vec2, f64) {
     let v = agent.speed();
-    let a = agent.longitudinal_accel();
-    let v_top = v_max.max(v);
-    let dist = travel(v, a, t, v_top);
+    let dist = forecast.travel(v, t, v_max.max(v));
     match process.lane {
         Some(lane_id) => {
             let lane = morph.lane(lane_id);
@@ -373,6 +439,8 @@ pub struct PlanStats {
     pub limit_rejects: u16,
     /// Rejected by collision.
     pub collision_rejects: u16,
+    /// Rejected for ending the horizon standing inside a conflict zone.
+    pub zone_rejects: u16,
     /// S_k of the best candidate (∞ when none).
     pub best_score: f64,
 }
@@ -412,6 +480,12 @@ pub struct Planner {
     /// The sampled profile yields: candidates that do not stop must end the horizon past
     /// `clear_distance` or able to stop before `yield_distance`.
     yielding: bool,
+    /// Conflict zones on the ego's lane, centre arc lengths [enter, exit], m: no candidate may
+    /// end the horizon standing in one.
+    zones: [[f64; 2]; MAX_CONFLICTS],
+    n_zones: usize,
+    /// Scratch of one agent's boxes over the horizon and its post-encroachment margins.
+    sweep: [Option<[f64; 4]>; MAX_STEPS + 2 * MAX_SWEEP_STEPS],
     steps: usize,
     dt: f64,
     // Monte Carlo terminal states, structure of arrays.
@@ -434,6 +508,9 @@ impl Default for Planner {
             yield_distance: f64::INFINITY,
             clear_distance: f64::INFINITY,
             yielding: false,
+            zones: [[0.0; 2]; MAX_CONFLICTS],
+            n_zones: 0,
+            sweep: [None; MAX_STEPS + 2 * MAX_SWEEP_STEPS],
             steps: 0,
             dt: 0.1,
             end_t: [0.0; MAX_SAMPLES],
@@ -444,27 +521,48 @@ impl Default for Planner {
 }
 
 impl Planner {
-    /// Prepares a cycle: start state, curvature caps and the occupancy of `agents` (all valid
-    /// agents, with their process states). Agents following the ego in its lane are left to
-    /// keep their own distance.
+    /// Prepares a cycle: start state, curvature caps, the conflict zones of the ego's lane
+    /// `lane_id` and the occupancy of `agents` (all valid agents, with their process states and
+    /// forecasts). Agents following the ego in its lane are left to keep their own distance.
     #[allow(clippy::too_many_arguments)]
     pub fn prepare(
         &mut self,
-        lane: &Lane,
+        lane_id: u8,
         start: FrenetState,
         goal_distance: f64,
         agents: &[AgentState],
         processes: &[ProcessState; MAX_AGENTS],
+        forecasts: &[Forecast; MAX_AGENTS],
         morph: &Morphology,
         p: &TrajectoryParams,
     ) {
+        let lane = morph.lane(lane_id);
+        self.keep_zones(morph.zones_on(lane_id));
         self.start = start;
         self.dt = p.dt_s;
         self.steps = ((p.horizon_s / p.dt_s + 1e-9) as usize).clamp(1, MAX_STEPS);
         self.goal_distance = goal_distance.max(1.0);
         let reach = p.max_speed_mps.max(start.ds) * self.steps as f64 * p.dt_s + 1.0;
         self.fill_vcap(lane, start.s, reach, p);
-        self.fill_occupancy(lane, agents, processes, morph, reach, p);
+        self.fill_occupancy(lane, agents, processes, forecasts, morph, reach, p);
+    }
+
+    /// Keeps only the conflict zones `zones` (centre arc lengths [enter, exit]) as places the
+    /// ego may not stand in.
+    pub fn keep_zones(&mut self, zones: impl Iterator<Item = [f64; 2]>) {
+        self.n_zones = 0;
+        for z in zones.take(MAX_CONFLICTS) {
+            self.zones[self.n_zones] = z;
+            self.n_zones += 1;
+        }
+    }
+
+    /// True when the ego's centre at arc length `s` puts its footprint inside a conflict zone
+    /// of its lane.
+    pub fn in_zone(&self, s: f64) -> bool {
+        self.zones[..self.n_zones]
+            .iter()
+            .any(|z| s > z[0] && s < z[1])
     }
 
     fn fill_vcap(&mut self, lane: &Lane, s0: f64, reach: f64, p: &TrajectoryParams) {
@@ -498,11 +596,13 @@ impl Planner {
         }
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn fill_occupancy(
         &mut self,
         lane: &Lane,
         agents: &[AgentState],
         processes: &[ProcessState; MAX_AGENTS],
+        forecasts: &[Forecast; MAX_AGENTS],
         morph: &Morphology,
         reach: f64,
         p: &TrajectoryParams,
@@ -551,34 +651,80 @@ impl Planner {
                 .lane
                 .map(|l| morph.lane(l).segment_at(processes[j].s_m, 0))
                 .unwrap_or(0);
+            // The agent's box at every step. For the post-encroachment margins, its boxes while
+            // in its passage of the conflict zone are kept for the steps `behind` before the
+            // first and `ahead` after the last (before now, at its current speed), and each
+            // step also gets the union of those in its window [step − behind, step + ahead].
+            let f = &forecasts[j];
+            let window = |secs: f64| (libm::ceil(secs / self.dt) as usize).min(MAX_SWEEP_STEPS);
+            let (behind, ahead) = (window(f.pet_s[0]), window(f.pet_s[1]));
+            let total = behind + self.steps + ahead;
+            let v = agent.speed();
             // Predictions move at most a few segments per step: after the first global
             // projection, search only segments near the previous foot point.
             let mut near: Option<usize> = None;
-            for step in 0..self.steps {
-                let t = (step + 1) as f64 * self.dt;
-                let (pos, heading) =
-                    predict(agent, &processes[j], morph, t, p.max_speed_mps, &mut hint);
+            for i in 0..total {
+                self.sweep[i] = None;
+                let t = (i as f64 - behind as f64 + 1.0) * self.dt;
+                let forecast = if t > 0.0 { *f } else { Forecast::default() };
+                let (pos, heading) = predict(
+                    agent,
+                    &processes[j],
+                    &forecast,
+                    morph,
+                    t,
+                    p.max_speed_mps,
+                    &mut hint,
+                );
                 if pos.x < min.x || pos.x > max.x || pos.y < min.y || pos.y > max.y {
                     near = None;
                     continue;
                 }
-                let f = match near {
+                let fr = match near {
                     Some(k) => {
                         lane.project_range(pos, k.saturating_sub(4).max(first), (k + 6).min(last))
                     }
                     None => lane.project_range(pos, first, last),
                 };
-                near = Some(f.segment);
-                let rel = heading - f.tangent;
+                near = Some(fr.segment);
+                let rel = heading - fr.tangent;
                 let (c, s) = (fabs(cos(rel)), fabs(sin(rel)));
-                let margin = p.safety_margin_m + p.margin_growth_mps * t;
+                let margin = p.safety_margin_m + p.margin_growth_mps * t.max(0.0);
                 let ext_s = half_l + c * half_l + s * half_w + margin;
                 let ext_l = half_w + s * half_l + c * half_w + margin;
-                if fabs(f.l) > lateral_reach + ext_l {
+                if fabs(fr.l) > lateral_reach + ext_l {
                     continue;
                 }
-                self.occupancy
-                    .add(step, f.s - ext_s, f.s + ext_s, f.l - ext_l, f.l + ext_l);
+                let b = [fr.s - ext_s, fr.s + ext_s, fr.l - ext_l, fr.l + ext_l];
+                let step = i.wrapping_sub(behind);
+                if step < self.steps {
+                    self.occupancy.add(step, b[0], b[1], b[2], b[3], false);
+                }
+                let along = forecast.travel(v, t, p.max_speed_mps.max(v));
+                if along >= f.pass_m[0] && along <= f.pass_m[1] {
+                    self.sweep[i] = Some(b);
+                }
+            }
+            if behind + ahead == 0 {
+                continue;
+            }
+            for step in 0..self.steps {
+                let union = self.sweep[step..=step + behind + ahead]
+                    .iter()
+                    .flatten()
+                    .fold(None::<[f64; 4]>, |u, b| {
+                        Some(u.map_or(*b, |u| {
+                            [
+                                u[0].min(b[0]),
+                                u[1].max(b[1]),
+                                u[2].min(b[2]),
+                                u[3].max(b[3]),
+                            ]
+                        }))
+                    });
+                if let Some([s_lo, s_hi, l_lo, l_hi]) = union {
+                    self.occupancy.add(step, s_lo, s_hi, l_lo, l_hi, true);
+                }
             }
         }
     }
@@ -603,14 +749,14 @@ impl Planner {
         let v0 = self.start.ds.max(0.0);
         let v_top = p.max_speed_mps.max(v0);
         let low_speed = self.start.ds < p.low_speed_mps;
-        self.yielding = nominal.yields && !low_speed;
+        self.yielding = nominal.yields();
         for k in 0..n {
             let (zt, zv, zl) = if k == 0 {
                 (0.0, 0.0, 0.0)
             } else {
                 (z(&mut rng), z(&mut rng), z(&mut rng))
             };
-            let (duration, target) = if self.yielding && k % 2 == 1 {
+            let (duration, target) = if self.yielding && !low_speed && k % 2 == 1 {
                 let v_end = v0 * rng.random::<f64>();
                 (nominal.duration * v0 / (v0 + v_end), v_end)
             } else {
@@ -652,6 +798,7 @@ impl Planner {
                 }
                 Err(Reject::Limits) => stats.limit_rejects += 1,
                 Err(Reject::Collision(_) | Reject::Commits) => stats.collision_rejects += 1,
+                Err(Reject::StandsInZone) => stats.zone_rejects += 1,
             }
         }
         best
@@ -680,16 +827,17 @@ impl Planner {
     }
 
     /// Among the first `n` sampled candidates that respect every limit, the one whose first
-    /// predicted contact is latest, with that time (s; `None` when every candidate breaks a
-    /// limit). For when no candidate is free of contact: see [`Planner::first_contact`].
+    /// predicted contact with a footprint is latest, with that time (s; ∞ for one without;
+    /// `None` when every candidate breaks a limit). Post-encroachment margins do not count
+    /// here: for when no candidate is free of contact, see [`Planner::first_contact`].
     pub fn latest_contact(&self, n: usize, p: &TrajectoryParams) -> Option<(Candidate, f64)> {
         let mut latest: Option<(Candidate, f64)> = None;
         for k in 0..n.clamp(1, MAX_SAMPLES) {
             let (t_end, v_end, l_end) = (self.end_t[k], self.end_v[k], self.end_l[k]);
-            let contact = match self.evaluate(t_end, v_end, l_end, p) {
+            let contact = match self.evaluate_with(t_end, v_end, l_end, false, p) {
                 Ok(c) => return Some((c, f64::INFINITY)),
                 Err(Reject::Collision(t)) => t,
-                Err(Reject::Limits | Reject::Commits) => continue,
+                Err(Reject::Limits | Reject::Commits | Reject::StandsInZone) => continue,
             };
             if latest.is_none_or(|(_, t)| contact > t) {
                 let (s, l) = self.polynomials(t_end, v_end, l_end, p);
@@ -705,8 +853,8 @@ impl Planner {
         latest
     }
 
-    /// Time of the first predicted contact along a rendered trajectory, s (`None`: none
-    /// within the horizon).
+    /// Time of the first predicted contact with a footprint along a rendered trajectory, s
+    /// (`None`: none within the horizon).
     pub fn first_contact(&self, trajectory: &Trajectory) -> Option<f64> {
         trajectory
             .points()
@@ -714,7 +862,7 @@ impl Planner {
             .skip(1)
             .take(self.steps)
             .enumerate()
-            .find(|(step, q)| self.occupancy.hits(*step, q.s, q.l))
+            .find(|(step, q)| self.occupancy.hit(*step, q.s, q.l) == Hit::Contact)
             .map(|(_, q)| q.t)
     }
 
@@ -724,6 +872,18 @@ impl Planner {
         t_end: f64,
         v_end: f64,
         l_end: f64,
+        p: &TrajectoryParams,
+    ) -> Result<Candidate, Reject> {
+        self.evaluate_with(t_end, v_end, l_end, true, p)
+    }
+
+    /// [`Planner::evaluate`]; post-encroachment margins reject only when `margins`.
+    fn evaluate_with(
+        &self,
+        t_end: f64,
+        v_end: f64,
+        l_end: f64,
+        margins: bool,
         p: &TrajectoryParams,
     ) -> Result<Candidate, Reject> {
         let st = &self.start;
@@ -775,8 +935,10 @@ impl Planner {
             };
             if self.occupancy.may_hit(step, s) {
                 let lat = lat.unwrap_or_else(|| if on_poly { l.pos(t) } else { l_end });
-                if self.occupancy.hits(step, s, lat) {
-                    return Err(Reject::Collision(t));
+                match self.occupancy.hit(step, s, lat) {
+                    Hit::Contact => return Err(Reject::Collision(t)),
+                    Hit::Margin if margins => return Err(Reject::Collision(t)),
+                    _ => {}
                 }
             }
             if t_goal.is_nan() && s >= goal {
@@ -786,27 +948,37 @@ impl Planner {
             prev_s = s;
         }
         let horizon = self.steps as f64 * self.dt;
-        // A yielding candidate that does not stop must end the horizon either through the
-        // conflict zone it yields at, or still able to stop before it (a quartic stop peaks
-        // at 1.5 × its mean deceleration); otherwise the next car could find it inside.
-        if self.yielding && v_end > 0.0 && prev_s < st.s + self.clear_distance {
-            let v_h = if horizon <= t_end {
-                q.vel(horizon)
+        let v_last = if horizon <= t_end {
+            q.vel(horizon)
+        } else {
+            v_end
+        };
+        // A yielding candidate must stop at or before the yield point, or end the horizon
+        // through what it yields to, or still able to stop before the yield point (a quartic
+        // stop peaks at 1.5 × its mean deceleration); otherwise the next car could find it
+        // inside.
+        if self.yielding && prev_s < st.s + self.clear_distance {
+            let stops_at = if v_end > 0.0 {
+                prev_s + v_last * v_last / (2.0 * p.max_brake_mps2 / 1.5)
             } else {
-                v_end
+                s_end
             };
-            let stopping = v_h * v_h / (2.0 * p.max_brake_mps2 / 1.5);
-            if prev_s + stopping > st.s + self.yield_distance {
+            if stops_at > st.s + self.yield_distance + 1e-6 {
                 return Err(Reject::Commits);
             }
         }
+        // Never plan to stand inside a conflict zone: a car waiting there blocks the crossing
+        // lane (and is hit if that lane's traffic has the right of way).
+        let stands_at = if v_end < STANDING_MPS {
+            Some(s_end)
+        } else {
+            (v_last < STANDING_MPS).then_some(prev_s)
+        };
+        if stands_at.is_some_and(|s| self.in_zone(s)) {
+            return Err(Reject::StandsInZone);
+        }
         let t_n = if t_goal.is_nan() {
-            let v_last = if horizon <= t_end {
-                q.vel(horizon)
-            } else {
-                v_end
-            };
-            (horizon + (goal - prev_s) / v_last.max(0.5)).min(3.0 * p.t_ref_s)
+            (horizon + (goal - prev_s) / v_last.max(0.5)).min(10.0 * p.t_ref_s)
         } else {
             t_goal
         };
@@ -859,7 +1031,8 @@ impl Planner {
             v_min = v_min.min(v);
             v_max = v_max.max(v);
         }
-        if v_max > v_top || v_min < -0.05 {
+        // Planned speeds never go negative (a stop that undershoots would plan reversing).
+        if v_max > v_top || v_min < -1e-6 {
             return Err(Reject::Limits);
         }
         // Lateral jerk is quadratic: ends and vertex; lateral acceleration is cubic: ends and
@@ -920,10 +1093,52 @@ impl Planner {
                 x: pos.x,
                 y: pos.y,
                 heading: tangent + libm::atan2(dl, ds.max(0.1)),
-                speed: ds,
+                // The limit check refuses any candidate below −1e-6 m/s; this drops the
+                // rounding left where a stop polynomial reaches zero.
+                speed: ds.max(0.0),
                 accel: dds,
             };
         }
+    }
+
+    /// The minimum-risk fallback into `out`: brake ([`Planner::minimum_risk`]), enough to stop
+    /// before the yield point `stop_distance` m ahead if possible. Braking where the ego
+    /// stands can be the worst choice inside a junction, in the path of crossing traffic: when
+    /// braking is predicted to be hit, the dynamically feasible candidate around one of
+    /// `drive_on` (profiles that hold or gain speed) that postpones the first predicted
+    /// contact longest is taken instead, if it does (it leaves the others the most time to
+    /// react); when braking would end standing inside a conflict zone, one free of predicted
+    /// contact is taken: the ego clears the zone. Returns the index of the profile taken
+    /// (`None`: braking).
+    pub fn fallback(
+        &mut self,
+        stop_distance: f64,
+        lane: &Lane,
+        drive_on: &[Profile],
+        cycle: u64,
+        p: &TrajectoryParams,
+        out: &mut Trajectory,
+    ) -> Option<usize> {
+        self.minimum_risk(stop_distance, lane, p, out);
+        let contact = self.first_contact(out);
+        let stands_in_zone = out.points().last().is_some_and(|q| self.in_zone(q.s));
+        if contact.is_none() && !stands_in_zone {
+            return None;
+        }
+        let mut latest = contact.unwrap_or(f64::INFINITY);
+        let mut taken = None;
+        for (k, profile) in drive_on.iter().enumerate() {
+            self.sample(profile, p.samples, cycle, p);
+            if let Some((c, t)) = self.latest_contact(p.samples, p) {
+                let clears = stands_in_zone && t.is_infinite();
+                if t > latest || (clears && taken.is_none()) {
+                    latest = t;
+                    taken = Some(k);
+                    self.render(&c, lane, out);
+                }
+            }
+        }
+        taken
     }
 
     /// Minimum-risk fallback: brake along the lane at constant deceleration, enough to stop
@@ -959,7 +1174,7 @@ impl Planner {
                 x: pos.x,
                 y: pos.y,
                 heading: tangent,
-                speed: v0 - decel * tt,
+                speed: (v0 - decel * tt).max(0.0),
                 accel: if t < t_stop { -decel } else { 0.0 },
             };
         }
@@ -976,4 +1191,6 @@ pub enum Reject {
     /// A yielding candidate that neither clears the conflict zone within the horizon nor can
     /// still stop before it (counted with collisions).
     Commits,
+    /// Ends the horizon standing inside a conflict zone.
+    StandsInZone,
 }

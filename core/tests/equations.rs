@@ -9,6 +9,7 @@ use concord_core::params::{AdviceParams, ChoiceParams, OpmParams, Params};
 use concord_core::saliency::{attend, softmax, Saliency, FEATURES};
 use concord_core::scene::{paper, AgentState, BuiltIn, Morphology, ProcessState, Turn, Vec2};
 use concord_core::trajectory::{Quartic, Quintic};
+use concord_core::DecisionCore;
 
 const EPS: f64 = 1e-9;
 
@@ -195,7 +196,7 @@ fn profile_arrival_times() {
         accel: 0.0,
         target_speed: 10.0,
         duration: 3.0,
-        yields: false,
+        stop_m: f64::INFINITY,
     };
     assert!((keep.arrival_time(10.0, 50.0) - 5.0).abs() < EPS);
     // Accelerate 2 m/s² from 0 to 4 m/s (2 s, 4 m), then 4 m/s: 12 m takes 2 + 8/4 = 4 s.
@@ -203,7 +204,7 @@ fn profile_arrival_times() {
         accel: 2.0,
         target_speed: 4.0,
         duration: 3.0,
-        yields: false,
+        stop_m: f64::INFINITY,
     };
     assert!((acc.arrival_time(0.0, 12.0) - 4.0).abs() < EPS);
     // Braking 2 m/s² from 4 m/s stops after 4 m: 5 m is never reached.
@@ -211,7 +212,7 @@ fn profile_arrival_times() {
         accel: -2.0,
         target_speed: 0.0,
         duration: 3.0,
-        yields: true,
+        stop_m: 4.0,
     };
     assert!(stop.arrival_time(4.0, 5.0).is_infinite());
 }
@@ -231,34 +232,87 @@ fn eq16_gate_checks_in_order() {
     };
     let safe = |_| true;
     assert_eq!(
-        gate(None, &log, Turn::Left, &p, safe).1,
+        gate(None, &log, Turn::Left, 2.5, true, &p, safe).1,
         AdviceVerdict::NoAdvice
     );
     assert_eq!(
-        gate(Some(&advice(45, 0.9, 2.5)), &log, Turn::Left, &p, safe),
+        gate(
+            Some(&advice(45, 0.9, 2.5)),
+            &log,
+            Turn::Left,
+            2.5,
+            true,
+            &p,
+            safe
+        ),
         (Some(Maneuver::Accelerate), AdviceVerdict::Accepted)
     );
     assert_eq!(
-        gate(Some(&advice(5, 0.9, 2.5)), &log, Turn::Left, &p, safe).1,
+        gate(
+            Some(&advice(5, 0.9, 2.5)),
+            &log,
+            Turn::Left,
+            2.5,
+            true,
+            &p,
+            safe
+        )
+        .1,
         AdviceVerdict::UnknownRequest,
         "older than 40 cycles"
     );
     assert_eq!(
-        gate(Some(&advice(51, 0.9, 2.5)), &log, Turn::Left, &p, safe).1,
+        gate(
+            Some(&advice(51, 0.9, 2.5)),
+            &log,
+            Turn::Left,
+            2.5,
+            true,
+            &p,
+            safe
+        )
+        .1,
         AdviceVerdict::UnknownRequest,
         "not issued yet"
     );
     assert_eq!(
-        gate(Some(&advice(45, 0.69, 2.5)), &log, Turn::Left, &p, safe).1,
+        gate(
+            Some(&advice(45, 0.69, 2.5)),
+            &log,
+            Turn::Left,
+            2.5,
+            true,
+            &p,
+            safe
+        )
+        .1,
         AdviceVerdict::LowConfidence
     );
     // Request 45 was issued at 2.25 s; its deadline is 3.75 s.
     assert_eq!(
-        gate(Some(&advice(45, 0.9, 3.76)), &log, Turn::Left, &p, safe).1,
+        gate(
+            Some(&advice(45, 0.9, 3.76)),
+            &log,
+            Turn::Left,
+            2.5,
+            true,
+            &p,
+            safe
+        )
+        .1,
         AdviceVerdict::Late
     );
     assert_eq!(
-        gate(Some(&advice(45, f64::NAN, 2.5)), &log, Turn::Left, &p, safe).1,
+        gate(
+            Some(&advice(45, f64::NAN, 2.5)),
+            &log,
+            Turn::Left,
+            2.5,
+            true,
+            &p,
+            safe
+        )
+        .1,
         AdviceVerdict::Malformed
     );
     let right = Advice {
@@ -266,12 +320,35 @@ fn eq16_gate_checks_in_order() {
         ..advice(45, 0.9, 2.5)
     };
     assert_eq!(
-        gate(Some(&right), &log, Turn::Left, &p, safe).1,
+        gate(Some(&right), &log, Turn::Left, 2.5, true, &p, safe).1,
         AdviceVerdict::NavigationInconsistent
     );
     assert_eq!(
-        gate(Some(&advice(45, 0.9, 2.5)), &log, Turn::Left, &p, |_| false),
+        gate(
+            Some(&advice(45, 0.9, 2.5)),
+            &log,
+            Turn::Left,
+            2.5,
+            true,
+            &p,
+            |_| false
+        ),
         (None, AdviceVerdict::Unsafe)
+    );
+    // Accepted advice applies until its request's deadline (3.75 s), then expires; the first
+    // cycle to see it judges it even after the deadline.
+    let a = advice(45, 0.9, 3.7);
+    assert_eq!(
+        gate(Some(&a), &log, Turn::Left, 3.74, false, &p, safe).1,
+        AdviceVerdict::Accepted
+    );
+    assert_eq!(
+        gate(Some(&a), &log, Turn::Left, 3.76, false, &p, safe).1,
+        AdviceVerdict::Expired
+    );
+    assert_eq!(
+        gate(Some(&a), &log, Turn::Left, 3.76, true, &p, safe).1,
+        AdviceVerdict::Accepted
     );
 }
 
@@ -381,8 +458,9 @@ fn crossing_scene(
     scene
 }
 
-/// The CAV 30 m before the crossing at 10 m/s and the HDV `hdv_before` m before it: the core
-/// after one step, the best "decelerate" candidate and the CAV's distance to its yield point.
+/// The CAV 45 m before the crossing at 10 m/s (able to stop comfortably before the junction)
+/// and the HDV `hdv_before` m before it: the core after one step, the best "decelerate"
+/// candidate and the CAV's distance to its yield point.
 fn decelerate_towards_the_crossing(
     hdv_before: f64,
 ) -> (
@@ -392,10 +470,10 @@ fn decelerate_towards_the_crossing(
 ) {
     let p = Params::default();
     let mut core = paper_core(p);
-    let scene = crossing_scene(core.morphology(), 30.0, 10.0, hdv_before);
+    let scene = crossing_scene(core.morphology(), 45.0, 10.0, hdv_before);
     core.step(&scene, 0.0, None).unwrap();
     let profile = core.choice().profiles[Maneuver::Decelerate.index()];
-    assert!(profile.yields, "{profile:?}");
+    assert!(profile.yields(), "{profile:?}");
     let mut planner = *core.planner();
     planner.sample(&profile, p.trajectory.samples, 1, &p.trajectory);
     let mut stats = concord_core::trajectory::PlanStats::default();
@@ -407,8 +485,27 @@ fn decelerate_towards_the_crossing(
 
 #[test]
 fn decelerating_behind_a_car_that_will_have_passed_rolls_on_instead_of_stopping() {
-    // The HDV is 3 m from the crossing: it is through long before the CAV arrives.
-    let (_, best, _) = decelerate_towards_the_crossing(3.0);
+    // The merge: the CAV 40 m before the join at 10 m/s, the main-lane car 5 m before it: it
+    // is through long before the CAV arrives, so "decelerate" slows and merges behind it.
+    use concord_core::scene::merge;
+    let p = Params::default();
+    let m = Morphology::built_in(BuiltIn::Merge);
+    let (s_main, s_ramp) = m.conflict_between(merge::MAIN, merge::RAMP).unwrap();
+    let (cav, h_cav, _) = m.lane(merge::RAMP).pose_at(s_ramp - 40.0, 0);
+    let (hdv, h_hdv, _) = m.lane(merge::MAIN).pose_at(s_main - 5.0, 0);
+    let mut scene =
+        concord_core::Scene::new(0.0, AgentState::moving(0, cav, h_cav, 10.0), merge::RAMP);
+    scene.push(AgentState::moving(1, hdv, h_hdv, 10.0));
+    let mut core = DecisionCore::new(p, m).unwrap();
+    core.step(&scene, 0.0, None).unwrap();
+    let profile = core.choice().profiles[Maneuver::Decelerate.index()];
+    assert!(profile.yields(), "{profile:?}");
+    let mut planner = *core.planner();
+    planner.sample(&profile, p.trajectory.samples, 1, &p.trajectory);
+    let mut stats = concord_core::trajectory::PlanStats::default();
+    let best = planner
+        .run(p.trajectory.samples, &p.trajectory, &mut stats)
+        .expect("a feasible decelerate candidate");
     let v_end = best.s.vel(best.duration);
     assert!(v_end > 1.0, "the best decelerate candidate stops: {best:?}");
 }
@@ -458,6 +555,26 @@ fn with_no_contact_free_plan_the_fallback_postpones_contact_at_least_as_long_as_
             let t_chosen = planner
                 .first_contact(&d.trajectory)
                 .unwrap_or(f64::INFINITY);
+            // It never stands inside a conflict zone when a plan that clears it free of
+            // contact exists.
+            if d.trajectory
+                .points()
+                .last()
+                .is_some_and(|q| planner.in_zone(q.s))
+            {
+                for m in [Maneuver::KeepSpeed, Maneuver::Accelerate] {
+                    let mut probe = planner;
+                    let prof = core.choice().profiles[m.index()];
+                    probe.sample(&prof, p.trajectory.samples, d.cycle, &p.trajectory);
+                    let clears = probe
+                        .latest_contact(p.trajectory.samples, &p.trajectory)
+                        .is_some_and(|(_, t)| t.is_infinite());
+                    assert!(
+                        !clears,
+                        "CAV {cav_before} m, HDV {hdv_before} m: stands in a zone though {m:?} clears"
+                    );
+                }
+            }
             assert!(
                 t_chosen >= t_brake,
                 "CAV {cav_before} m, HDV {hdv_before} m: contact at {t_chosen} s, braking {t_brake} s"
@@ -522,4 +639,138 @@ fn merge_geometry_conflicts_where_the_ramp_joins() {
     core.step(&scene, 0.0, None).unwrap();
     assert_eq!(core.triplet().n_conflicts, 1);
     assert!(core.triplet().conflicts[0].delta_ttc_s < 1e-6);
+}
+
+/// A lone ego at `speed` on the paper's straight westbound lane, after one step.
+fn lone_ego(speed: f64) -> DecisionCore {
+    let mut core = paper_core(Params::default());
+    let ego = AgentState::moving(0, Vec2::new(40.0, 5.0), std::f64::consts::PI, speed);
+    let scene = concord_core::Scene::new(0.0, ego, paper::WEST_STRAIGHT);
+    core.step(&scene, 0.0, None).unwrap();
+    core
+}
+
+#[test]
+fn table2_the_jerk_limit_rejects_a_candidate_only_it_forbids() {
+    // From 10 m/s, +1.8 m/s in 1 s: the quartic peaks at 1.5·1.8 = 2.7 m/s² (within the
+    // 3 m/s² limit) with 6·1.8 = 10.8 m/s³ of jerk at its ends (limit 10); over 1.5 s the
+    // jerk is 4.8 m/s³.
+    let p = Params::default().trajectory;
+    let core = lone_ego(10.0);
+    let planner = core.planner();
+    assert_eq!(
+        planner.evaluate(1.0, 11.8, 0.0, &p),
+        Err(concord_core::trajectory::Reject::Limits)
+    );
+    assert!(planner.evaluate(1.5, 11.8, 0.0, &p).is_ok());
+}
+
+#[test]
+fn table2_score_weighs_time_longitudinal_and_lateral_jerk_and_the_offset() {
+    // S_k = c_e·T_n/T_ref + c_s·(∫|s⃛| + ∫|l⃛|)/J_max + c_l·|l_T|/l_max, each integral
+    // computed here numerically from the candidate's polynomials.
+    let p = Params::default().trajectory;
+    let core = lone_ego(10.0);
+    let planner = core.planner();
+    let s0 = planner.start.s;
+    let goal = s0 + Params::default().choice.reference_speed_mps * p.t_ref_s;
+    for (t_end, v_end, l_end) in [(3.0, 12.0, 0.0), (3.0, 12.0, 0.5), (2.5, 8.0, -0.4)] {
+        let c = planner.evaluate(t_end, v_end, l_end, &p).expect("feasible");
+        let n = 100_000;
+        let dt = t_end / n as f64;
+        let (mut js, mut jl) = (0.0, 0.0);
+        for k in 0..n {
+            let t = (k as f64 + 0.5) * dt;
+            js += c.s.jerk(t).abs() * dt;
+            jl += c.l.jerk(t).abs() * dt;
+        }
+        // T_n: when s reaches the goal (past the polynomial at v_end).
+        let s_end = c.s.pos(t_end);
+        let t_n = if s_end >= goal {
+            let (mut lo, mut hi) = (0.0, t_end);
+            for _ in 0..60 {
+                let mid = 0.5 * (lo + hi);
+                if c.s.pos(mid) < goal {
+                    lo = mid
+                } else {
+                    hi = mid
+                }
+            }
+            hi
+        } else {
+            t_end + (goal - s_end) / v_end
+        };
+        let expected = p.c_efficiency * t_n / p.t_ref_s
+            + p.c_smoothness * (js + jl) / p.j_max_norm
+            + p.c_lateral * l_end.abs() / p.max_lateral_offset_m;
+        assert!(
+            (c.score - expected).abs() < 2e-3,
+            "({t_end}, {v_end}, {l_end}): {} vs {expected} (jerk {js:.3} + {jl:.3})",
+            c.score
+        );
+        if l_end != 0.0 {
+            assert!(jl > 0.05, "the lateral move has jerk");
+        }
+        assert!(js > 0.05, "the speed change has jerk");
+    }
+}
+
+#[test]
+fn eq4_an_agent_is_selected_by_its_delta_ttc_or_its_closeness_only() {
+    // CAV 50.7 m from the crossing at 10 m/s (TTC 5.1 s); HDV 35 m from it.
+    let selected = |hdv_speed: f64, hdv_before: f64| {
+        let mut core = paper_core(Params::default());
+        let m = *core.morphology();
+        let (_, s_hdv) = m
+            .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
+            .unwrap();
+        let (hdv, h, _) = m.lane(paper::HDV_STRAIGHT).pose_at(s_hdv - hdv_before, 0);
+        let mut scene = paper_scene(0.0, 10.0, 0.0);
+        scene.agents[0] = AgentState::moving(1, hdv, h, hdv_speed);
+        core.step(&scene, 0.0, None).unwrap();
+        core.triplet().n_objects
+    };
+    // At 8 m/s (TTC 4.4 s, |ΔTTC| 0.7 s): a risky conflict.
+    assert_eq!(selected(8.0, 35.0), 1);
+    // At 3 m/s (TTC 11.7 s, |ΔTTC| 6.6 s) and 85 m away along the paths: not selected.
+    assert_eq!(selected(3.0, 35.0), 0);
+}
+
+#[test]
+fn eq12_to_15_the_choice_follows_its_history_when_utilities_tie() {
+    // A lone ego turning left: accelerate and turn left have the same profile and utility,
+    // and a tie goes to the lower index (accelerate). With a history of turning left in the
+    // same situation, the corrected logit turns left.
+    let p = Params::default();
+    let mut core = paper_core(p);
+    let scene = paper_scene(0.0, 8.0, 0.0);
+    let mut lone = scene;
+    lone.n_agents = 0;
+    core.step(&lone, 0.0, None).unwrap();
+    let first = *core.choice();
+    let (a, l) = (Maneuver::Accelerate.index(), Maneuver::TurnLeft.index());
+    assert!((first.utility[a] - first.utility[l]).abs() < 1e-9);
+    let mut history = ChoiceHistory::default();
+    for k in 0..10 {
+        history.record(k as f64 * 0.1, first.state, Maneuver::TurnLeft);
+    }
+    let d = history.d_prev(&first.state);
+    assert!((d[l] - 1.0).abs() < 1e-9);
+    let v = correct(&first.utility, &d, history.previous, &p.choice);
+    assert!(v[l] > v[a]);
+    // The core does the same with its own history: having accelerated (the tie), it keeps
+    // accelerating: the tie in P_n (eq. 11) is broken in the corrected P_n (eq. 15).
+    for k in 1..5 {
+        let mut again = lone;
+        again.time_s = k as f64 * 0.1;
+        let d = core.step(&again, again.time_s, None).unwrap();
+        let ch = core.choice();
+        assert_eq!(d.maneuver, Maneuver::Accelerate);
+        assert!((ch.p_logit[a] - ch.p_logit[l]).abs() < 1e-9);
+        assert!(
+            ch.p_corrected[a] > ch.p_corrected[l] + 0.05,
+            "{:?}",
+            ch.p_corrected
+        );
+    }
 }

@@ -137,7 +137,7 @@ proptest! {
     #[test]
     fn gate_accepts_exactly_when_every_condition_holds(
         latest in 1u64..500, id in 0u64..520, conf in -0.2..1.2f64, delay in -1.0..3.0f64,
-        maneuver in 0u8..5, route in 0u8..3, safe: bool, nan: bool,
+        maneuver in 0u8..5, route in 0u8..3, safe: bool, nan: bool, first_look: bool, wait in 0.0..3.0f64,
     ) {
         let p = AdviceParams::default();
         let mut log = RequestLog::default();
@@ -146,9 +146,11 @@ proptest! {
         let m = Maneuver::try_from(maneuver).unwrap();
         let issued = id as f64 * 0.05;
         let advice = Advice { request_id: id, maneuver: m, confidence: if nan { f64::NAN } else { conf }, received_at_s: issued + delay };
-        let (applied, verdict) = gate(Some(&advice), &log, route, &p, |_| safe);
+        let now = advice.received_at_s + wait;
+        let (applied, verdict) = gate(Some(&advice), &log, route, now, first_look, &p, |_| safe);
         let fresh = id >= 1 && id <= latest && latest - id < p.freshness_cycles as u64;
-        let expected = !nan && fresh && conf >= p.confidence_min && delay <= p.deadline_s && m.consistent_with(route) && safe;
+        let expired = !first_look && now > issued + p.deadline_s;
+        let expected = !nan && fresh && !expired && conf >= p.confidence_min && delay <= p.deadline_s && m.consistent_with(route) && safe;
         prop_assert_eq!(verdict == AdviceVerdict::Accepted, expected);
         prop_assert_eq!(applied, if expected { Some(m) } else { None });
     }
@@ -180,6 +182,30 @@ proptest! {
     #![proptest_config(ProptestConfig { cases: 256, failure_persistence: None, ..ProptestConfig::default() })]
 
     #[test]
+    fn planned_speeds_never_go_negative(ego in ego_spec(), agents in prop::collection::vec(agent_spec(), 0..8), steps in 1usize..6) {
+        let mut core = paper_core(Params::default());
+        let mut scene = scene_from(&core, ego, &agents);
+        // A few steps, the ego following its plan, so stops and restarts are planned too.
+        for k in 0..steps {
+            let d = core.step(&scene, k as f64 * 0.1, None).unwrap();
+            for pt in d.trajectory.points() {
+                prop_assert!(pt.speed >= 0.0, "{} m/s at {} s ({:?})", pt.speed, pt.t, d.maneuver);
+            }
+            // Nor does the path: a polynomial speed below zero would move the car backwards.
+            for w in d.trajectory.points().windows(2) {
+                prop_assert!(w[1].s >= w[0].s - 1e-9, "backwards from {} to {} m at {} s ({:?})", w[0].s, w[1].s, w[1].t, d.maneuver);
+            }
+            let next = d.trajectory.sample(0.1).unwrap();
+            let dir = Vec2::from_angle(next.heading);
+            scene.time_s = (k + 1) as f64 * 0.1;
+            scene.ego.pos = Vec2::new(next.x, next.y);
+            scene.ego.vel = dir.scale(next.speed);
+            scene.ego.acc = dir.scale(next.accel);
+            scene.ego.heading = next.heading;
+        }
+    }
+
+    #[test]
     fn chosen_trajectory_is_collision_free_when_a_feasible_candidate_exists(ego in ego_spec(), agents in prop::collection::vec(agent_spec(), 1..12)) {
         let params = Params::default();
         let mut core = paper_core(params);
@@ -198,7 +224,7 @@ proptest! {
             let process = core.processes()[j];
             let mut hint = 0;
             for pt in d.trajectory.points().iter().skip(1) {
-                let other = predict(agent, &process, core.morphology(), pt.t, tp.max_speed_mps, &mut hint);
+                let other = predict(agent, &process, &core.forecasts()[j], core.morphology(), pt.t, tp.max_speed_mps, &mut hint);
                 prop_assert!(!rectangles_overlap((Vec2::new(pt.x, pt.y), pt.heading), other, tp.vehicle_length_m, tp.vehicle_width_m),
                     "collision with agent {} at t = {:.1} s", j, pt.t);
             }
@@ -227,6 +253,7 @@ fn a_leader_beyond_the_lane_end_still_blocks() {
         let (other, _) = predict(
             &agent,
             &core.processes()[0],
+            &core.forecasts()[0],
             core.morphology(),
             pt.t,
             20.0,

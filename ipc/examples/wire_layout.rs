@@ -75,7 +75,9 @@ fn main() {
             source,
             advice,
             fallback,
-            reserved
+            announce,
+            negotiation,
+            courtesy_rejects
         }),
         layout!(WireProcess {
             dist_to_stop_m,
@@ -96,9 +98,15 @@ fn main() {
             ego_ttc_s,
             agent_ttc_s,
             delta_ttc_s,
+            yielding,
+            proceeding,
+            undecided,
+            required_decel_mps2,
             agent_id,
             risky,
-            reserved
+            committed,
+            right_of_way,
+            stated
         }),
         layout!(WireObject {
             state,
@@ -179,6 +187,8 @@ fn main() {
             advice_received,
             advice_verdicts,
             advice_failures,
+            courtesy_rejects,
+            deadlock_announcements,
             cycle_ns,
             scene_age_ns,
             decide_ns

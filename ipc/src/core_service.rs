@@ -14,6 +14,7 @@ use std::fmt::Write as _;
 use std::io::Write as _;
 use std::time::Duration;
 
+use concord_core::negotiation::Phase;
 use concord_core::scene::{ExplicitIntent, Scene, SceneErrorKind};
 use concord_core::{Advice, AdviceVerdict, DecisionCore, Maneuver, Params};
 use hdrhistogram::Histogram;
@@ -267,6 +268,8 @@ struct Loop<'a> {
     advice: Option<Advice>,
     advice_unjudged: bool,
     intents: LanguageIntents,
+    /// Negotiation phase of the last decision published.
+    last_phase: Phase,
     decisions_since_request: u32,
     publish_failures: u64,
 }
@@ -334,6 +337,7 @@ pub fn run_observed(
         advice: None,
         advice_unjudged: false,
         intents: LanguageIntents::default(),
+        last_phase: Phase::Idle,
         decisions_since_request: 0,
         publish_failures: 0,
     };
@@ -527,6 +531,11 @@ impl Loop<'_> {
     fn publish_decision(&mut self, d: &concord_core::Decision, compute_ns: u64) {
         self.stats.decisions[d.source as usize] += 1;
         self.stats.fallbacks[d.fallback as usize] += 1;
+        self.stats.courtesy_rejects += u64::from(d.courtesy_rejects);
+        if d.negotiation == Phase::Announced && self.last_phase != Phase::Announced {
+            self.stats.deadlock_announcements += 1;
+        }
+        self.last_phase = d.negotiation;
         let mut wire = WireDecision::from_decision(
             d,
             self.last_sequence,
@@ -623,6 +632,11 @@ pub fn render_stats(s: &CoreStats, out: &mut impl std::fmt::Write) {
             }
         }
     }
+    let _ = write!(
+        out,
+        " | courtesy rejects {} | deadlock announcements {}",
+        s.courtesy_rejects, s.deadlock_announcements
+    );
     let _ = write!(
         out,
         " | cycle µs p50 {} p99 {} p99.9 {} max {} | scene age µs p50 {} p99 {} max {}",

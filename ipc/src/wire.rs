@@ -25,6 +25,8 @@ pub const TEXT_BYTES: usize = 256;
 pub const EHMI_MAX_CHARS: usize = 64;
 /// Objects carried by an advice request (the OPM selection).
 pub const WIRE_OBJECTS: usize = opm::MAX_SELECTED;
+/// Number of `AdviceVerdict` codes.
+pub const VERDICTS: usize = AdviceVerdict::ALL.len();
 
 /// An explicit intent [style, action, task] (eq. 8), each code with its confidence in [0, 1].
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
@@ -312,7 +314,12 @@ pub struct WireDecision {
     pub advice: u8,
     /// `FallbackReason` code.
     pub fallback: u8,
-    pub reserved: [u8; 3],
+    /// `Announcement` code: what the eHMI tells the other road users.
+    pub announce: u8,
+    /// Deadlock negotiation `Phase` code.
+    pub negotiation: u8,
+    /// Maneuvers refused for courtesy in this decision.
+    pub courtesy_rejects: u8,
 }
 
 impl WireDecision {
@@ -350,7 +357,9 @@ impl WireDecision {
             source: d.source as u8,
             advice: d.advice as u8,
             fallback: d.fallback as u8,
-            reserved: [0; 3],
+            announce: d.announce as u8,
+            negotiation: d.negotiation as u8,
+            courtesy_rejects: d.courtesy_rejects,
         }
     }
 
@@ -420,11 +429,22 @@ pub struct WireConflict {
     pub agent_ttc_s: f64,
     /// |ΔTTC|, s.
     pub delta_ttc_s: f64,
+    /// The other's implicit intent (§4.1): probabilities that it yields, proceeds or is
+    /// undecided, and the deceleration it needs to stop before its zone, m/s².
+    pub yielding: f32,
+    pub proceeding: f32,
+    pub undecided: f32,
+    pub required_decel_mps2: f32,
     /// Track id of the other party.
     pub agent_id: u32,
     /// 1 when |ΔTTC| is below the threshold.
     pub risky: u8,
-    pub reserved: [u8; 3],
+    /// 1 when the other can no longer stop comfortably before its zone.
+    pub committed: u8,
+    /// `RightOfWay` code: 1 the ego, 2 the other, 0 neither.
+    pub right_of_way: u8,
+    /// `Stated` code: what became of the other's stated action.
+    pub stated: u8,
 }
 
 /// A selected object of 𝓞 with its process, saliency and relation.
@@ -502,8 +522,14 @@ impl AdviceRequest {
                     .find(|o| o.agent == c.agent)
                     .map(|o| o.id)
                     .unwrap_or(u32::MAX),
+                yielding: c.intent.yielding as f32,
+                proceeding: c.intent.proceeding as f32,
+                undecided: c.intent.undecided as f32,
+                required_decel_mps2: c.intent.required_decel_mps2 as f32,
                 risky: u8::from(c.is_risky(&opm)),
-                reserved: [0; 3],
+                committed: u8::from(c.intent.committed),
+                right_of_way: c.right_of_way as u8,
+                stated: c.intent.stated as u8,
             };
         }
         let mut objects = [WireObject::default(); WIRE_OBJECTS];
@@ -825,9 +851,14 @@ pub struct CoreStats {
     pub advice_received: u64,
     /// Each received advice by the verdict of the first decision that weighed it
     /// (`AdviceVerdict` code).
-    pub advice_verdicts: [u64; 8],
+    pub advice_verdicts: [u64; VERDICTS],
     /// Requests the sidecar reported it could not answer, by [`AdviceFailure`] code.
     pub advice_failures: [u64; 5],
+    /// Maneuvers refused for courtesy (they would make another road user brake harder than
+    /// `max_imposed_decel_mps2`), over all decisions.
+    pub courtesy_rejects: u64,
+    /// Deadlock negotiations in which the ego announced that it goes first.
+    pub deadlock_announcements: u64,
     /// Whole-tick work time.
     pub cycle_ns: Percentiles,
     /// Scene stamp to the core's receipt.

@@ -70,7 +70,7 @@ pub struct Counters {
     pub inquiries: u64,
     pub confirmations: u64,
     pub replies: u64,
-    pub verdicts: [u64; 8],
+    pub verdicts: [u64; concord_ipc::wire::VERDICTS],
 }
 
 struct Party {

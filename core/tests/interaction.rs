@@ -1,0 +1,651 @@
+//! The interaction rules: implicit intents, post-encroachment margins, right of way, courtesy,
+//! where to stand, the deadlock negotiation, and the planner's forecasts and margins. Each
+//! test sets up a scene where its rule decides the outcome.
+mod common;
+
+use common::*;
+use concord_core::choice::{
+    choose, conflict_risk, efficiency, expected_wait, imposed_decel, ChoiceHistory, ChoiceOutcome,
+    EgoContext, Maneuver, Profile,
+};
+use concord_core::intent::{infer, Motion, Stated};
+use concord_core::negotiation::{Negotiation, Phase};
+use concord_core::opm::{ConflictPair, ConflictSet, OpmTriplet};
+use concord_core::params::{ChoiceParams, InteractionParams, OpmParams, Params};
+use concord_core::scene::{
+    paper, AgentState, BuiltIn, ConflictKind, ExplicitIntent, History, IntentAction, Morphology,
+    Rated, RightOfWay, Vec2,
+};
+use concord_core::trajectory::Reject;
+use concord_core::{DecisionCore, Scene};
+
+/// A conflict with the ego's and the other's passages at `ego` and `other` (distances from
+/// their centres, m) and the other at `v` m/s.
+fn pair(ego: [f64; 2], other: [f64; 2], v: f64) -> ConflictPair {
+    ConflictPair {
+        ego_pass_m: ego,
+        agent_pass_m: other,
+        ego_zone_m: ego,
+        agent_zone_m: other,
+        agent_speed_mps: v,
+        agent_ttc_s: other[0] / v.max(0.5),
+        ..ConflictPair::default()
+    }
+}
+
+/// Holding `v` m/s.
+fn keep(v: f64) -> Profile {
+    Profile {
+        target_speed: v,
+        duration: 3.0,
+        ..Profile::default()
+    }
+}
+
+#[test]
+fn passing_behind_a_car_that_will_have_left_is_safe_and_going_first_needs_its_margin() {
+    let ip = InteractionParams::default();
+    // The other at 10 m/s leaves its passage [10, 20] m at 2 s at the latest.
+    let other = [10.0, 20.0];
+    // Behind: entering at 4 s leaves 2 s ≥ pet_behind_s (1.6 s).
+    assert_eq!(
+        conflict_risk(
+            &keep(10.0),
+            10.0,
+            &pair([40.0, 50.0], other, 10.0),
+            0.0,
+            &ip
+        ),
+        0.0
+    );
+    // Entering at 2.5 s leaves 0.5 s: risky.
+    let close = conflict_risk(
+        &keep(10.0),
+        10.0,
+        &pair([25.0, 35.0], other, 10.0),
+        0.0,
+        &ip,
+    );
+    assert!(close > 0.3, "{close}");
+    // First: out at 0.5 s; the other enters [35, 45] at 2.9 s at the earliest (accelerating
+    // at 1.5 m/s²): 2.4 s ≥ pet_go_s (2 s). Its passage at [20, 30]: 1.3 s is too little.
+    let ego = [0.0, 5.0];
+    assert_eq!(
+        conflict_risk(&keep(10.0), 10.0, &pair(ego, [35.0, 45.0], 10.0), 0.0, &ip),
+        0.0
+    );
+    let short = conflict_risk(&keep(10.0), 10.0, &pair(ego, [20.0, 30.0], 10.0), 0.0, &ip);
+    assert!(short > 0.1, "{short}");
+    // Unless the other lets the ego go first.
+    assert_eq!(
+        conflict_risk(&keep(10.0), 10.0, &pair(ego, [20.0, 30.0], 10.0), 1.0, &ip),
+        0.0
+    );
+    // A profile that stops before the passage does not enter it.
+    let stop = Profile {
+        stop_m: 20.0,
+        ..keep(10.0)
+    };
+    assert_eq!(
+        conflict_risk(&stop, 10.0, &pair([25.0, 35.0], other, 10.0), 0.0, &ip),
+        0.0
+    );
+}
+
+#[test]
+fn arriving_together_with_a_proceeding_car_going_at_speed_is_unsafe_and_the_choice_keeps_the_margin(
+) {
+    // The paper's scene with both cars 30 m from the crossing at 8 m/s: holding speed they
+    // would meet there. The choice either yields or times its turn to pass behind.
+    let mut core = paper_core(Params::default());
+    let ip = core.params().interaction;
+    let m = *core.morphology();
+    let (s_cav, s_hdv) = m
+        .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
+        .unwrap();
+    let (cav, h_cav, _) = m.lane(paper::CAV_LEFT).pose_at(s_cav - 30.0, 0);
+    let (hdv, h_hdv, _) = m.lane(paper::HDV_STRAIGHT).pose_at(s_hdv - 30.0, 0);
+    let mut scene = Scene::new(0.0, AgentState::moving(0, cav, h_cav, 8.0), paper::CAV_LEFT);
+    scene.push(AgentState::moving(1, hdv, h_hdv, 8.0));
+    let d = core.step(&scene, 0.0, None).unwrap();
+    let c = core.conflicts().pairs()[0];
+    let y = core.yields()[0];
+    assert!(conflict_risk(&keep(8.0), 8.0, &c, y, &ip) > 0.5);
+    let chosen = core.choice().profiles[d.logit_maneuver.index()];
+    assert!(
+        conflict_risk(&chosen, 8.0, &c, y, &ip) < 0.05,
+        "{:?} {chosen:?}",
+        d.logit_maneuver
+    );
+    assert!(core.choice().safety[d.logit_maneuver.index()] > 0.95);
+}
+
+fn motion(speed: f64, decel: f64, accel: f64) -> Motion {
+    Motion {
+        speed,
+        decel,
+        accel,
+        standing_s: 0.0,
+    }
+}
+
+fn stated(action: IntentAction, confidence: f64) -> ExplicitIntent {
+    ExplicitIntent {
+        action: Some(Rated {
+            value: action,
+            confidence,
+        }),
+        ..ExplicitIntent::UNKNOWN
+    }
+}
+
+#[test]
+fn implicit_intent_from_braking_speed_trend_standing_and_the_point_of_no_return() {
+    let ip = InteractionParams::default();
+    let none = ExplicitIntent::UNKNOWN;
+    let sum = |i: &concord_core::intent::ImplicitIntent| i.yielding + i.proceeding + i.undecided;
+    // 8 m/s, 20 m to its zone: stopping needs 1.6 m/s²; braking at that is yielding.
+    let y = infer(&motion(8.0, 1.6, -1.6), 20.0, &none, 0.7, &ip);
+    assert!(y.yielding > 0.85 && !y.committed, "{y:?}");
+    assert!((y.required_decel_mps2 - 1.6).abs() < 1e-9);
+    // Not braking: undecided, may proceed; accelerating: proceeding.
+    let c = infer(&motion(8.0, 0.0, 0.0), 20.0, &none, 0.7, &ip);
+    assert!(c.yielding == 0.0 && c.undecided > 0.5, "{c:?}");
+    let a = infer(&motion(8.0, 0.0, 1.2), 20.0, &none, 0.7, &ip);
+    assert!(a.proceeding > 0.85, "{a:?}");
+    // 10 m/s, 10 m before the zone: 5 m/s² needed, more than comfortable: committed.
+    let k = infer(&motion(10.0, 1.0, -1.0), 10.0, &none, 0.7, &ip);
+    assert!(k.committed && k.proceeding > 0.9, "{k:?}");
+    // Standing before its zone: yielding; moving off: proceeding.
+    let s = infer(&motion(0.0, 0.0, 0.0), 5.0, &none, 0.7, &ip);
+    assert_eq!(s.yielding, ip.standing_yield);
+    let off = infer(&motion(0.2, 0.0, 1.0), 5.0, &none, 0.7, &ip);
+    assert!(off.proceeding > 0.5, "{off:?}");
+    // In its zone: in the way, whatever it intends.
+    let inside = infer(&motion(3.0, 0.0, 0.0), -1.0, &none, 0.7, &ip);
+    assert!(inside.committed && inside.proceeding == 1.0);
+    for i in [y, c, a, k, s, off, inside] {
+        assert!((sum(&i) - 1.0).abs() < 1e-9, "{i:?}");
+    }
+}
+
+#[test]
+fn a_stated_yield_counts_only_while_the_motion_does_not_say_proceeding() {
+    let ip = InteractionParams::default();
+    let go_ahead = stated(IntentAction::Yield, 0.9);
+    // Cruising: it resolves the undecided share towards yielding.
+    let c = infer(&motion(8.0, 0.0, 0.0), 20.0, &go_ahead, 0.7, &ip);
+    assert_eq!(c.stated, Stated::Yield);
+    assert!(c.yielding > 0.6, "{c:?}");
+    // Accelerating into the conflict: ignored, it is proceeding.
+    let a = infer(&motion(8.0, 0.0, 1.2), 20.0, &go_ahead, 0.7, &ip);
+    assert_eq!(a.stated, Stated::Contradicted);
+    assert!(a.yielding < 0.05 && a.proceeding > 0.85, "{a:?}");
+    // Committed: ignored.
+    let k = infer(&motion(10.0, 0.0, 0.0), 10.0, &go_ahead, 0.7, &ip);
+    assert_eq!(k.stated, Stated::Contradicted);
+    // Weak: not counted at all.
+    let weak = infer(
+        &motion(8.0, 0.0, 0.0),
+        20.0,
+        &stated(IntentAction::Yield, 0.5),
+        0.7,
+        &ip,
+    );
+    assert_eq!(weak.stated, Stated::Nothing);
+    assert_eq!(weak.yielding, 0.0);
+    // A stated proceed is the cautious reading: it always counts.
+    let p = infer(
+        &motion(0.0, 0.0, 0.0),
+        5.0,
+        &stated(IntentAction::Proceed, 0.9),
+        0.7,
+        &ip,
+    );
+    assert_eq!(p.stated, Stated::Proceed);
+    assert!(p.proceeding > 0.2, "{p:?}");
+}
+
+#[test]
+fn motion_reads_the_speed_trend_when_no_acceleration_is_reported() {
+    // A car braking from 10 to 8 m/s over 1 s whose source reports no acceleration.
+    let ip = InteractionParams::default();
+    let mut h = History::default();
+    for k in 0..=10 {
+        let t = k as f64 * 0.1;
+        let v = 10.0 - 2.0 * t;
+        h.record(t, &[AgentState::moving(7, Vec2::new(0.0, 0.0), 0.0, v)]);
+    }
+    let now = AgentState::moving(7, Vec2::new(0.0, 0.0), 0.0, 8.0);
+    let m = Motion::of(&now, h.track(7), 1.0, &ip);
+    assert!((m.decel - 2.0).abs() < 1e-6, "{m:?}");
+    // A report of braking that the trend does not confirm yet counts only as far as both.
+    let mut reported = now;
+    reported.acc = Vec2::new(-4.0, 0.0);
+    let r = Motion::of(&reported, h.track(7), 1.0, &ip);
+    assert!((r.decel - 2.0).abs() < 1e-6, "{r:?}");
+}
+
+/// The paper's CAV on its left turn `cav_before` m before the stop line at `v` m/s, and a car on
+/// the minor road (northbound) `minor_before` m before its crossing with the turn at `mv`
+/// m/s, braking at `md` m/s².
+fn priority_scene(v: f64, minor_before: f64, mv: f64, md: f64) -> (DecisionCore, Scene) {
+    let core = paper_core(Params::default());
+    let m = *core.morphology();
+    let (s_cav, s_minor) = m
+        .conflict_between(paper::CAV_LEFT, paper::NORTH_STRAIGHT)
+        .unwrap();
+    let (cav, h_cav, _) = m.lane(paper::CAV_LEFT).pose_at(s_cav - 25.0, 0);
+    let (car, h_car, _) = m
+        .lane(paper::NORTH_STRAIGHT)
+        .pose_at(s_minor - minor_before, 0);
+    let mut scene = Scene::new(0.0, AgentState::moving(0, cav, h_cav, v), paper::CAV_LEFT);
+    let mut other = AgentState::moving(1, car, h_car, mv);
+    other.acc = Vec2::from_angle(h_car).scale(-md);
+    scene.push(other);
+    (core, scene)
+}
+
+#[test]
+fn with_the_right_of_way_the_ego_counts_on_the_other_yielding_until_it_is_committed() {
+    // The minor-road car 30 m away at 8 m/s can still stop comfortably (1.3 m/s²): the ego,
+    // on the major road, counts it as yielding.
+    let (mut core, scene) = priority_scene(8.0, 30.0, 8.0, 0.0);
+    core.step(&scene, 0.0, None).unwrap();
+    let c = core.conflicts().pairs()[0];
+    assert_eq!(c.right_of_way, RightOfWay::A);
+    assert!(!c.intent.committed);
+    assert_eq!(core.yields()[0], 1.0);
+    // 6 m away at 8 m/s it cannot: its motion decides (not yielding).
+    let (mut core, scene) = priority_scene(8.0, 6.0, 8.0, 0.0);
+    core.step(&scene, 0.0, None).unwrap();
+    let c = core.conflicts().pairs()[0];
+    assert!(c.intent.committed);
+    assert!(core.yields()[0] < 0.1, "{:?}", core.yields());
+}
+
+#[test]
+fn the_paper_junction_gives_the_hdv_priority_over_the_left_turn_and_the_turn_over_the_minor_road() {
+    let m = Morphology::built_in(BuiltIn::PaperIntersection);
+    let hdv = m.conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT).unwrap();
+    assert_eq!(hdv.right_of_way, RightOfWay::B);
+    let minor = m.conflict(paper::CAV_LEFT, paper::NORTH_STRAIGHT).unwrap();
+    assert_eq!(minor.right_of_way, RightOfWay::A);
+    // Seen from the other lane, the same relation.
+    let back = m.conflict(paper::HDV_STRAIGHT, paper::CAV_LEFT).unwrap();
+    assert_eq!(back.right_of_way, RightOfWay::A);
+}
+
+#[test]
+fn courtesy_refuses_a_plan_that_makes_the_other_brake_hard() {
+    let ip = InteractionParams::default();
+    // The ego leaves its passage after 1 s; the other, 15 m before its passage at 10 m/s,
+    // would have to stop within 10 m after its reaction time: 5 m/s².
+    let c = pair([0.0, 10.0], [15.0, 25.0], 10.0);
+    let b = imposed_decel(&keep(10.0), 10.0, &c, 0.0, &ip);
+    assert!((b - 5.0).abs() < 1e-9, "{b}");
+    // Far enough away, nothing is imposed; passing behind imposes nothing either.
+    assert_eq!(
+        imposed_decel(
+            &keep(10.0),
+            10.0,
+            &pair([0.0, 10.0], [60.0, 70.0], 10.0),
+            0.0,
+            &ip
+        ),
+        0.0
+    );
+    assert_eq!(
+        imposed_decel(
+            &keep(10.0),
+            10.0,
+            &pair([60.0, 70.0], [15.0, 25.0], 10.0),
+            0.0,
+            &ip
+        ),
+        0.0
+    );
+    // In the choice: the ego about to cross, the other 12 m before its passage at 10 m/s and
+    // undecided (counted as letting the ego go first with probability 0.5): going first is
+    // refused, and counted; yielding is not.
+    let close = ConflictPair {
+        agent_ttc_s: 1.2,
+        ..pair([1.0, 8.0], [12.0, 22.0], 10.0)
+    };
+    let out = choose_with(&[close], &[0.5], 8.0);
+    for m in [
+        Maneuver::Accelerate,
+        Maneuver::KeepSpeed,
+        Maneuver::TurnLeft,
+    ] {
+        assert!(
+            out.courtesy_rejected[m.index()],
+            "{m:?}: {:?}",
+            out.imposed_decel
+        );
+    }
+    assert!(!out.courtesy_rejected[Maneuver::Decelerate.index()]);
+    assert!(out.imposed_decel[Maneuver::TurnLeft.index()] > ip.max_imposed_decel_mps2);
+    assert_eq!(out.choice, Maneuver::Decelerate);
+}
+
+/// The choice stage on the paper's turn, at `speed` m/s, with the given conflicts and
+/// probabilities that each other lets the ego go first.
+fn choose_with(pairs: &[ConflictPair], yields: &[f64], speed: f64) -> ChoiceOutcome {
+    let p = Params::default();
+    let ctx = EgoContext {
+        speed,
+        speed_cap: 10.0,
+        yield_distance: 0.5,
+        goal_distance: pairs[0].ego_zone_m[1],
+        route: concord_core::scene::Turn::Left,
+        max_brake: p.trajectory.max_brake_mps2,
+        min_duration: p.trajectory.min_duration_s,
+        max_duration: p.trajectory.max_duration_s,
+        plan_horizon_s: p.trajectory.horizon_s,
+        ..EgoContext::default()
+    };
+    let mut out = ChoiceOutcome::default();
+    choose(
+        &OpmTriplet::default(),
+        &ConflictSet::of(pairs),
+        yields,
+        &ctx,
+        &ChoiceHistory::default(),
+        &p.opm,
+        &p.interaction,
+        &p.choice,
+        &mut out,
+    );
+    out
+}
+
+#[test]
+fn yielding_to_a_car_that_waits_itself_costs_the_deadlock_wait() {
+    let ip = InteractionParams::default();
+    let opm = OpmParams::default();
+    let p = ChoiceParams::default();
+    let c = pair([10.0, 20.0], [5.0, 15.0], 8.0);
+    let moving = expected_wait(&[c], &[0.0], &opm, &ip);
+    let waiting = expected_wait(&[c], &[1.0], &opm, &ip);
+    assert!((waiting - ip.deadlock_wait_s).abs() < 1e-9);
+    assert!(moving < 2.0, "{moving}");
+    let ctx = EgoContext {
+        speed: 5.0,
+        speed_cap: 10.0,
+        yield_distance: 8.0,
+        goal_distance: 20.0,
+        min_duration: 1.0,
+        max_duration: 6.0,
+        plan_horizon_s: 5.0,
+        ..EgoContext::default()
+    };
+    let stop = Profile {
+        accel: -1.6,
+        duration: 3.2,
+        stop_m: 8.0,
+        ..Profile::default()
+    };
+    assert!(efficiency(&stop, &ctx, waiting, &p) < efficiency(&stop, &ctx, moving, &p));
+}
+
+#[test]
+fn the_waiting_point_keeps_the_footprint_outside_every_crossing_lane() {
+    // Far enough back to stop comfortably, the CAV yields to the HDV at the stop line, not
+    // inside the junction, where its footprint would be in the north-south lanes.
+    let p = Params::default();
+    let mut core = paper_core(p);
+    let d = core.step(&paper_scene(0.0, 8.0, 8.0), 0.0, None).unwrap();
+    assert!(core.choice().profiles[Maneuver::Decelerate.index()].yields());
+    let planner = core.planner();
+    let stop = planner.start.s + planner.yield_distance;
+    let m = core.morphology();
+    for z in m.zones_on(paper::CAV_LEFT) {
+        assert!(
+            stop <= z[0] - p.trajectory.stop_margin_m + 1e-9 || stop >= z[1],
+            "stop at {stop:.2} in zone {z:?}"
+        );
+    }
+    assert!(stop < m.lane(paper::CAV_LEFT).stop_s, "stop at {stop:.2}");
+    assert!(d.trajectory.points().iter().all(|q| q.speed >= 0.0));
+}
+
+#[test]
+fn a_zone_the_ego_can_no_longer_stop_before_comfortably_is_one_it_clears() {
+    // At 10 m/s, 8 m before the stop line: stopping there needs 6 m/s².
+    let p = Params::default();
+    let mut core = paper_core(p);
+    let m = *core.morphology();
+    let lane = m.lane(paper::CAV_LEFT);
+    let (pos, h, _) = lane.pose_at(lane.stop_s - 8.0, 0);
+    let mut scene = Scene::new(0.0, AgentState::moving(0, pos, h, 10.0), paper::CAV_LEFT);
+    // A car on the minor road, so there is something to yield to at the first crossing.
+    let minor = m.lane(paper::NORTH_STRAIGHT);
+    let (q, hq, _) = minor.pose_at(20.0, 0);
+    scene.push(AgentState::moving(1, q, hq, 6.0));
+    core.step(&scene, 0.0, None).unwrap();
+    let planner = core.planner();
+    let first = m
+        .zones_on(paper::CAV_LEFT)
+        .map(|z| z[0])
+        .fold(f64::INFINITY, f64::min);
+    assert!(
+        planner.start.s + planner.yield_distance > first,
+        "yields at {:.1}, before the first zone at {first:.1}",
+        planner.start.s + planner.yield_distance
+    );
+}
+
+#[test]
+fn no_candidate_ends_standing_inside_a_conflict_zone() {
+    // The CAV slow inside the junction: a stop candidate would stand in the north-south
+    // lanes' zones.
+    let p = Params::default();
+    let mut core = paper_core(p);
+    let lane = *core.morphology().lane(paper::CAV_LEFT);
+    let (pos, h, _) = lane.pose_at(33.0, 0);
+    let scene = Scene::new(0.0, AgentState::moving(0, pos, h, 2.0), paper::CAV_LEFT);
+    core.step(&scene, 0.0, None).unwrap();
+    let planner = core.planner();
+    assert!(planner.in_zone(33.0));
+    assert_eq!(
+        planner.evaluate(2.0, 0.0, 0.0, &p.trajectory),
+        Err(Reject::StandsInZone)
+    );
+    // Driving on is fine.
+    assert!(planner.evaluate(3.0, 6.0, 0.0, &p.trajectory).is_ok());
+}
+
+#[test]
+fn conflict_zones_come_from_the_footprint_and_the_lane_widths() {
+    let m = Morphology::built_in(BuiltIn::PaperIntersection);
+    let c = m.conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT).unwrap();
+    assert_eq!(c.kind, ConflictKind::Crossing);
+    // The HDV's lane is straight and the CAV's crosses it at a right angle: the HDV is in the
+    // CAV's band (half-width 2.5 m) while its centre is within 2.5 + 4.8 / 2 m of the point.
+    // (On the exit side the CAV's lane bends towards the HDV's, so the zone ends a little
+    // later.)
+    assert!((c.zone_b[0] - (c.s_b - 4.9)).abs() < 0.01, "{c:?}");
+    assert!(
+        c.zone_b[1] >= c.s_b + 4.9 - 0.01 && c.zone_b[1] < c.s_b + 5.5,
+        "{c:?}"
+    );
+    // On the CAV's turn: at the zone's entry a corner of its footprint touches the HDV's
+    // band (y ∈ [−7.5, −2.5]); just before, none does.
+    let lane = m.lane(paper::CAV_LEFT);
+    let corners = |s: f64| {
+        let (p, t, _) = lane.pose_at(s, 0);
+        let (f, n) = (
+            Vec2::from_angle(t),
+            Vec2::from_angle(t + std::f64::consts::FRAC_PI_2),
+        );
+        [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)]
+            .map(|(a, b)| p.plus(f.scale(2.4 * a)).plus(n.scale(1.0 * b)))
+    };
+    let in_band = |q: Vec2| (q.y + 5.0).abs() <= 2.5 && q.x.abs() < 40.0;
+    assert!(corners(c.zone_a[0] + 0.02).into_iter().any(in_band));
+    assert!(!corners(c.zone_a[0] - 0.02).into_iter().any(in_band));
+    // The turn joins the southbound lane: a merge.
+    let merge = m.conflict(paper::CAV_LEFT, paper::SOUTH_STRAIGHT).unwrap();
+    assert_eq!(merge.kind, ConflictKind::Merging);
+    assert!((merge.pass_a[1] - merge.pass_a[0] - 4.8).abs() < 1e-9);
+}
+
+#[test]
+fn the_planner_keeps_the_post_encroachment_margin_behind_a_crossing_car() {
+    // The HDV just through the crossing at 10 m/s; the CAV arrives behind it: holding 6 m/s
+    // on the turn it would enter its passage 0.9 s after the HDV left, less than pet_behind_s.
+    let run = |p: Params| {
+        let mut core = paper_core(p);
+        let m = *core.morphology();
+        let c = m.conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT).unwrap();
+        let (cav, h_cav, _) = m.lane(paper::CAV_LEFT).pose_at(c.zone_a[0] - 6.0, 0);
+        let (hdv, h_hdv, _) = m.lane(paper::HDV_STRAIGHT).pose_at(c.zone_b[1] - 1.0, 0);
+        let mut scene = Scene::new(0.0, AgentState::moving(0, cav, h_cav, 6.0), paper::CAV_LEFT);
+        scene.push(AgentState::moving(1, hdv, h_hdv, 10.0));
+        core.step(&scene, 0.0, None).unwrap();
+        let t = p.trajectory;
+        core.planner().evaluate(2.0, 6.0, 0.0, &t)
+    };
+    let r = run(Params::default());
+    assert!(matches!(r, Err(Reject::Collision(_))), "{r:?}");
+    let mut no_margin = Params::default();
+    no_margin.interaction.pet_behind_s = 0.0;
+    no_margin.interaction.pet_go_s = 0.0;
+    assert!(run(no_margin).is_ok());
+}
+
+#[test]
+fn a_yielding_car_is_forecast_to_stop_so_the_ego_can_go_first() {
+    // The minor-road car 25 m before its crossing at 8 m/s: braking to stop before its zone
+    // it is forecast to stop there; cruising, it is forecast to drive on.
+    let (mut braking, scene) = priority_scene(8.0, 25.0, 8.0, 1.6);
+    braking.step(&scene, 0.0, None).unwrap();
+    assert!(braking.forecasts()[0].stop_in_m.is_finite());
+    let mut equal = Params::default();
+    // Without the right of way (so its motion alone decides), a cruising car drives on.
+    equal.interaction.trust_yield = 0.8;
+    let core = DecisionCore::new(equal, Morphology::built_in(BuiltIn::PaperIntersection));
+    let mut core = core.unwrap();
+    let (_, scene) = priority_scene(8.0, 25.0, 8.0, 0.0);
+    let mut s = scene;
+    // Put the cruising car on the major road instead (it then has the right of way).
+    let m = *core.morphology();
+    let (_, s_hdv) = m
+        .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
+        .unwrap();
+    let (hdv, h_hdv, _) = m.lane(paper::HDV_STRAIGHT).pose_at(s_hdv - 25.0, 0);
+    s.agents[0] = AgentState::moving(1, hdv, h_hdv, 8.0);
+    core.step(&s, 0.0, None).unwrap();
+    assert!(core.forecasts()[0].stop_in_m.is_infinite());
+}
+
+/// A conflict where the other waits `d` m before its zone and the ego waits `e` m before its.
+fn waiting(e: f64, d: f64, v: f64, a: f64) -> ConflictPair {
+    ConflictPair {
+        ego_zone_m: [e, e + 10.0],
+        agent_zone_m: [d, d + 10.0],
+        agent_speed_mps: v,
+        agent_accel_mps2: a,
+        ..ConflictPair::default()
+    }
+}
+
+#[test]
+fn a_deadlock_is_announced_watched_and_broken() {
+    let ip = InteractionParams::default();
+    let id = |_| 42;
+    let mut n = Negotiation::default();
+    let both = [waiting(2.0, 3.0, 0.0, 0.0)];
+    n.update(&both, id, 0.0, 0.0, &ip);
+    assert_eq!(n.phase, Phase::Waiting);
+    n.update(&both, id, 0.0, 0.4, &ip);
+    assert_eq!(n.phase, Phase::Waiting);
+    n.update(&both, id, 0.0, ip.deadlock_after_s + 0.01, &ip);
+    assert_eq!(n.phase, Phase::Announced);
+    assert!(n.announces() && !n.yielded(42));
+    let announced = ip.deadlock_after_s + 0.01;
+    n.update(&both, id, 0.0, announced + 0.5 * ip.watch_s, &ip);
+    assert_eq!(n.phase, Phase::Announced);
+    n.update(&both, id, 0.0, announced + ip.watch_s + 0.01, &ip);
+    assert_eq!(n.phase, Phase::Going);
+    assert!(n.yielded(42));
+    // Once the ego has left the zone, it is over.
+    n.update(&[waiting(-11.0, 3.0, 0.0, 0.0)], id, 5.0, 10.0, &ip);
+    assert_eq!(n.phase, Phase::Idle);
+}
+
+#[test]
+fn a_deadlock_negotiation_ends_when_the_other_takes_the_way() {
+    let ip = InteractionParams::default();
+    let id = |_| 42;
+    let mut n = Negotiation::default();
+    let both = [waiting(2.0, 3.0, 0.0, 0.0)];
+    n.update(&both, id, 0.0, 0.0, &ip);
+    n.update(&both, id, 0.0, 1.0, &ip);
+    assert_eq!(n.phase, Phase::Announced);
+    // It moves off after the announcement: the ego gives way again.
+    n.update(&[waiting(2.0, 2.8, 0.3, 1.2)], id, 0.0, 1.2, &ip);
+    assert_eq!(n.phase, Phase::Idle);
+    // Only both waiting is a deadlock: an ego still rolling is not waiting.
+    n.update(&both, id, 3.0, 2.0, &ip);
+    assert_eq!(n.phase, Phase::Idle);
+}
+
+#[test]
+fn the_core_announces_going_first_in_a_deadlock_and_then_goes() {
+    // The CAV and a minor-road car (with equal priority here) both standing before their
+    // zones: the core announces, watches and goes.
+    let mut params = Params::default();
+    params.interaction.trust_yield = 0.8;
+    let mut core = paper_core(params);
+    let m = *core.morphology();
+    let c = m.conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT).unwrap();
+    // The HDV (which has priority) stands 3 m before its zone, the CAV at its stop line.
+    let lane = m.lane(paper::CAV_LEFT);
+    let (cav, h_cav, _) = lane.pose_at(lane.stop_s - 1.5, 0);
+    let (hdv, h_hdv, _) = m.lane(paper::HDV_STRAIGHT).pose_at(c.zone_b[0] - 3.0, 0);
+    let mut phases = Vec::new();
+    let mut announced_then_went = false;
+    for k in 0..60 {
+        let t = k as f64 * 0.05;
+        let mut scene = Scene::new(t, AgentState::moving(0, cav, h_cav, 0.0), paper::CAV_LEFT);
+        scene.push(AgentState::moving(1, hdv, h_hdv, 0.0));
+        let d = core.step(&scene, t, None).unwrap();
+        phases.push(d.negotiation);
+        if d.negotiation == Phase::Going && d.maneuver != Maneuver::Decelerate {
+            announced_then_went = true;
+        }
+        if d.negotiation == Phase::Announced {
+            assert_eq!(d.announce, concord_core::Announcement::GoingFirst);
+        }
+    }
+    assert!(phases.contains(&Phase::Announced), "{phases:?}");
+    assert!(announced_then_went, "{phases:?}");
+}
+
+#[test]
+fn the_fallback_clears_a_zone_rather_than_standing_in_it() {
+    // Slow inside the junction with nobody around: braking would stand in the north-south
+    // lanes; the fallback drives on instead.
+    let p = Params::default();
+    let mut core = paper_core(p);
+    let lane = *core.morphology().lane(paper::CAV_LEFT);
+    let (pos, h, _) = lane.pose_at(33.0, 0);
+    let scene = Scene::new(0.0, AgentState::moving(0, pos, h, 3.0), paper::CAV_LEFT);
+    core.step(&scene, 0.0, None).unwrap();
+    let mut planner = *core.planner();
+    let mut braking = concord_core::Trajectory::default();
+    planner.minimum_risk(f64::INFINITY, &lane, &p.trajectory, &mut braking);
+    assert!(planner.in_zone(braking.points().last().unwrap().s));
+    let profiles = core.choice().profiles;
+    let drive_on = [
+        profiles[Maneuver::KeepSpeed.index()],
+        profiles[Maneuver::Accelerate.index()],
+    ];
+    let mut out = concord_core::Trajectory::default();
+    let taken = planner.fallback(f64::INFINITY, &lane, &drive_on, 1, &p.trajectory, &mut out);
+    assert!(taken.is_some());
+    let end = out.points().last().unwrap();
+    assert!(!planner.in_zone(end.s) || end.speed > 1.0, "{end:?}");
+}
