@@ -38,7 +38,7 @@
 
 use concord_core::advice::Advice;
 use concord_core::scene::Turn;
-use concord_core::{Decision, DecisionCore, DecisionSource, Maneuver, Params};
+use concord_core::{Announcement, Decision, DecisionCore, Maneuver, Params};
 
 use crate::driver::{idm, DriverParams, DriverStyle, HumanDriver, Signal};
 use crate::world::{World, DT};
@@ -62,6 +62,17 @@ pub trait Controller {
 /// The CAV's own IDM parameters (a balanced driver's).
 fn cav_params() -> DriverParams {
     DriverParams::of(DriverStyle::Balanced)
+}
+
+/// Time constant with which a baseline closes on the curve speed limit, s.
+const CURVE_TAU_S: f64 = 0.5;
+
+/// `accel`, limited so that the CAV takes the curves ahead at no more lateral acceleration
+/// than Concord's planner allows ([`World::ego_speed_limit`] at the CAV's comfortable
+/// braking): every controller drives the same car.
+fn within_curves(w: &World, accel: f64) -> f64 {
+    let limit = w.ego_speed_limit(cav_params().b_comf);
+    accel.min((limit - w.ego.v) / CURVE_TAU_S)
 }
 
 /// Conservative IDM with yielding at the conflict zones.
@@ -108,7 +119,10 @@ impl Controller for IdmYield {
             Some(line) => idm(w.ego.v, self.desired_mps, line.max(0.1), 0.0, &p).min(follow),
             None => follow,
         };
-        Command { accel, ehmi: None }
+        Command {
+            accel: within_curves(w, accel),
+            ehmi: None,
+        }
     }
 }
 
@@ -133,12 +147,17 @@ fn predict(w: &World, i: usize, a_c: f64, a_h: f64) -> (f64, f64, bool, bool) {
     let (mut ec, mut hc) = w.to_conflict(i);
     let (mut vc, mut vh) = (w.ego.v, w.hdvs[i].car.v);
     let (mut pc, mut ph) = (0.0, 0.0);
+    let brake = cav_params().b_comf;
     let mut overlap = false;
     let (mut c_left, mut h_left, mut c_in, mut h_in) = (None, None, None, None);
     let mut t = 0.0;
     while t < HORIZON_S {
+        // The leader's own speed also keeps to the curves (see `within_curves`).
+        let limit = w.ego_speed_limit_at(w.ego.s + pc, brake);
         let (nc, nh) = (
-            (vc + a_c * dt).clamp(0.0, 14.0),
+            (vc + a_c * dt)
+                .clamp(0.0, 14.0)
+                .min(limit.max(vc.min(limit))),
             (vh + a_h * dt).clamp(0.0, 14.0),
         );
         let (dc, dh) = (0.5 * (vc + nc) * dt, 0.5 * (vh + nh) * dt);
@@ -194,13 +213,13 @@ impl Controller for Stackelberg {
             // game's top speed.
             let (gap, v_lead) = w.ego_leader();
             return Command {
-                accel: idm(w.ego.v, 14.0, gap, v_lead, &cav_params()),
+                accel: within_curves(w, idm(w.ego.v, 14.0, gap, v_lead, &cav_params())),
                 ehmi: None,
             };
         }
         if w.t + 1e-9 < self.next_decision_s {
             return Command {
-                accel: self.held,
+                accel: within_curves(w, self.held),
                 ehmi: None,
             };
         }
@@ -235,7 +254,7 @@ impl Controller for Stackelberg {
         }
         self.held = best.1;
         Command {
-            accel: best.1,
+            accel: within_curves(w, best.1),
             ehmi: None,
         }
     }
@@ -318,7 +337,10 @@ impl Controller for GapAcceptance {
             Some(e) => idm(w.ego.v, self.desired_mps, e.max(0.1), 0.0, &p).min(follow),
             None => follow,
         };
-        Command { accel, ehmi: None }
+        Command {
+            accel: within_curves(w, accel),
+            ehmi: None,
+        }
     }
 }
 
@@ -331,13 +353,11 @@ pub enum Advisor {
     Oracle,
 }
 
-/// The eHMI message that shows decision `d`: "please go ahead" when it gives way (or brakes
-/// as the minimum-risk fallback), else "I am going first". Every Concord controller speaks
-/// through this one function.
+/// The eHMI message of a decision: the core's own announcement ("please go ahead" while it
+/// gives way, "I am going first" otherwise, and while a deadlock negotiation has announced
+/// it). Every Concord controller speaks through this one function.
 fn ehmi_of(d: &Decision) -> Option<Signal> {
-    Some(Signal::announcing(
-        d.maneuver.gives_way() || d.source == DecisionSource::MinimumRisk,
-    ))
+    Some(Signal::announcing(d.announce == Announcement::GivingWay))
 }
 
 /// The decision core as a controller.
@@ -571,6 +591,7 @@ pub fn best_maneuver(w: &World, drivers: &[HumanDriver], ehmi: bool) -> Maneuver
 mod tests {
     use super::*;
     use crate::world::ScenarioKind;
+    use concord_core::DecisionSource;
 
     fn drivers(w: &World) -> Vec<HumanDriver> {
         (0..w.hdvs.len())

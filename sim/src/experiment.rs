@@ -232,6 +232,17 @@ fn layout(w: &World, params: &Params) -> Layout {
     Layout {
         delta_ttc_s: params.opm.delta_ttc_threshold_s,
         zone_half_m: w.hdvs.iter().map(|h| h.zone_half_m).collect(),
+        pass_half_m: w
+            .hdvs
+            .iter()
+            .map(|h| {
+                if w.kind == ScenarioKind::Merge {
+                    0.5 * crate::world::CAR_LENGTH_M
+                } else {
+                    h.zone_half_m
+                }
+            })
+            .collect(),
         crossing_lanes: lanes.into_iter().map(|l| *w.morph.lane(l)).collect(),
         junction: w.junction(),
     }

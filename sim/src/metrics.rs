@@ -14,7 +14,9 @@
 //!   both would be in its zone at once (when their occupancy intervals overlap); the minimum
 //!   over the episode and the HDVs (∞ when they never would).
 //! * **PET** (post-encroachment time), s: per HDV, from the first of it and the CAV leaving its
-//!   zone to the other entering it (∞ when the other never enters); the smallest over the HDVs.
+//!   passage (the zone at a crossing; at a merge, half a car length around the merge point, so
+//!   the PET is the time gap there) to the other entering it (∞ when the other never enters);
+//!   the smallest over the HDVs.
 //! * **Collision** (footprints overlapped), **success** (the CAV drove 15 m past the conflict
 //!   zone without collision within the time limit), **time to clear** (when the CAV cleared the
 //!   conflict zone; the stream's measure of delay), s.
@@ -75,6 +77,10 @@ pub struct Layout {
     pub delta_ttc_s: f64,
     /// Each HDV's conflict-zone half-length, m, in the world's order.
     pub zone_half_m: Vec<f64>,
+    /// Half-length of the stretch around each HDV's conflict point whose occupancy gives the
+    /// PET, m: the zone at a crossing; at a merge, half a car length (the PET is then the time
+    /// gap at the merge point: after it the two cars follow each other inside the zone).
+    pub pass_half_m: Vec<f64>,
     /// The HDVs' lanes, each once.
     pub crossing_lanes: Vec<Lane>,
     /// The junction's bounding box (lower-left, upper-right corner), m.
@@ -200,10 +206,11 @@ pub fn compute(samples: &[Sample], layout: &Layout) -> Metrics {
             let first = |f: &dyn Fn(&HdvSample) -> bool| {
                 samples.iter().find(|s| f(&s.hdvs[i])).map(|s| s.t)
             };
-            let ego_in = first(&|h| inside(h.ego_d, i));
-            let ego_out = first(&|h| left(h.ego_d, i));
-            let hdv_in = first(&|h| inside(h.d, i));
-            let hdv_out = first(&|h| left(h.d, i));
+            let pass = layout.pass_half_m[i];
+            let ego_in = first(&|h| h.ego_d.abs() <= pass);
+            let ego_out = first(&|h| h.ego_d < -pass);
+            let hdv_in = first(&|h| h.d.abs() <= pass);
+            let hdv_out = first(&|h| h.d < -pass);
             // Whoever left first, and when the other entered.
             match (ego_out, hdv_out) {
                 (Some(e), h) if h.is_none_or(|h| e <= h) => {
@@ -282,6 +289,7 @@ mod tests {
         Layout {
             delta_ttc_s: 4.0,
             zone_half_m: vec![5.0; n],
+            pass_half_m: vec![5.0; n],
             crossing_lanes: Vec::new(),
             junction: (Vec2::ZERO, Vec2::ZERO),
         }

@@ -7,6 +7,11 @@
 
 use concord_core::scene::{merge, paper, AgentState, BuiltIn, Morphology, Scene, Vec2};
 
+/// Lateral acceleration every CAV controller keeps to in curves, m/s² (the core's default
+/// `max_lateral_accel_mps2`), and how far ahead it looks for them, m.
+pub const CURVE_LATERAL_MPS2: f64 = 4.0;
+pub const CURVE_LOOKAHEAD_M: f64 = 60.0;
+
 /// Simulation step, s (20 Hz).
 pub const DT: f64 = 0.05;
 /// Vehicle footprint, m.
@@ -252,6 +257,30 @@ impl World {
             .map(|o| ((o.s - me.s - CAR_LENGTH_M).max(0.1), o.v))
             .min_by(|a, b| a.0.total_cmp(&b.0))
             .unwrap_or((f64::INFINITY, 0.0))
+    }
+
+    /// Fastest the CAV may drive now to take every curve within [`CURVE_LOOKAHEAD_M`] at no
+    /// more than [`CURVE_LATERAL_MPS2`] of lateral acceleration, braking at `brake_mps2` before
+    /// it: min over the vertices ahead of √(v_k² + 2·b·d_k), v_k = √(a_lat / κ_k), m/s.
+    pub fn ego_speed_limit(&self, brake_mps2: f64) -> f64 {
+        self.ego_speed_limit_at(self.ego.s, brake_mps2)
+    }
+
+    /// [`World::ego_speed_limit`] with the CAV at arc length `s` of its lane, m/s.
+    pub fn ego_speed_limit_at(&self, s: f64, brake_mps2: f64) -> f64 {
+        let lane = self.morph.lane(self.ego.lane);
+        (0..=lane.segments())
+            .map(|k| (k, lane.s_at_vertex(k)))
+            .filter(|&(_, sk)| sk >= s - 1.0 && sk <= s + CURVE_LOOKAHEAD_M)
+            .map(|(k, sk)| {
+                let kappa = lane.curvature_at(sk, k.saturating_sub(1));
+                if kappa < 1e-9 {
+                    return f64::INFINITY;
+                }
+                let v = (CURVE_LATERAL_MPS2 / kappa).sqrt();
+                (v * v + 2.0 * brake_mps2 * (sk - s).max(0.0)).sqrt()
+            })
+            .fold(f64::INFINITY, f64::min)
     }
 
     /// In the merge, the nearest HDV past the merge point and ahead of the CAV as its leader:
