@@ -15,6 +15,7 @@ pub mod prompt;
 pub mod reply;
 pub mod schema;
 pub mod service;
+pub mod untrusted;
 
 use std::sync::atomic::AtomicU64;
 use std::sync::{mpsc as std_mpsc, Arc, Mutex};
