@@ -85,8 +85,8 @@ impl LlmAdvisor {
             self.cfg.advice.max_objects,
             request,
             history,
-            &[],
-            self.cfg.intent.max_text_chars,
+            &concord_sidecar::prompt::Stated::default(),
+            self.cfg.intent.weak_below,
         );
         let body = self
             .client

@@ -653,6 +653,8 @@ fn demo(speed: f64, duration: f64, iox_path: Option<&Path>) -> Result<(), String
     ]
     .into_iter()
     .peekable();
+    // Message numbers per party (passenger, road user 1): each party numbers its own.
+    let mut sent = std::collections::BTreeMap::new();
     let feed_args = with_iox(vec![
         "feed".into(),
         "--scenario".into(),
@@ -697,7 +699,12 @@ fn demo(speed: f64, duration: f64, iox_path: Option<&Path>) -> Result<(), String
                 TextSource::RoadUser => format!("road user {id}"),
             };
             println!("{elapsed:6.2} s  {who} says: {text:?}");
-            let _ = iox::send(&texts, &IntentText::new(clock::now_ns(), source, id, text));
+            let n = sent.entry((source as u8, id)).or_insert(0u64);
+            *n += 1;
+            let _ = iox::send(
+                &texts,
+                &IntentText::new(clock::now_ns(), *n, source, id, text),
+            );
         }
         while let Ok(Some(m)) = ehmi.receive() {
             let to = match (m.audience, m.addressee) {

@@ -98,6 +98,7 @@ fn scenes_in_advice_intents_and_ehmi_text_out() {
             said = true;
             let road_user = IntentText::new(
                 now_ns(),
+                1,
                 TextSource::RoadUser,
                 1,
                 "Go ahead, I will wait for you.",
@@ -105,6 +106,7 @@ fn scenes_in_advice_intents_and_ehmi_text_out() {
             iox::send(&texts, &road_user).unwrap();
             let passenger = IntentText::new(
                 now_ns(),
+                1,
                 TextSource::Passenger,
                 0,
                 "I am in a hurry, please hurry up.",

@@ -241,6 +241,7 @@ class IntentText(_Wire):
     _type_name = "ConcordIntentText"
     _fields_ = [
         ("stamp_ns", ctypes.c_uint64),
+        ("id", ctypes.c_uint64),
         ("source_id", ctypes.c_uint32),
         ("len", ctypes.c_uint16),
         ("source", ctypes.c_uint8),

@@ -153,6 +153,7 @@ fn main() {
         }),
         layout!(IntentText {
             stamp_ns,
+            id,
             source_id,
             len,
             source,

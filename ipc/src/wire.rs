@@ -649,11 +649,20 @@ pub enum TextSource {
 }
 
 /// Text from the passenger or another road user, on `concord/intent_text`. Untrusted.
+///
+/// `(source, source_id)` names the party: the sidecar sets only that party's intent from the
+/// text, whatever the text says. `id` numbers the messages of one party; with `stamp_ns` it lets
+/// the sidecar parse each message once, also when iceoryx2 hands a restarted sidecar the last
+/// sample again (a message is a repeat when neither its id nor its stamp is newer than those of
+/// the party's last parsed message, so a restarted publisher whose ids begin again is heard).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("ConcordIntentText")]
 #[repr(C)]
 pub struct IntentText {
+    /// When the message was sent, `CLOCK_MONOTONIC` ns.
     pub stamp_ns: u64,
+    /// Number of the message from its source, increasing by 1 per message (from 1).
+    pub id: u64,
     /// Track id of the road user (0 for the passenger).
     pub source_id: u32,
     /// Bytes used in `text`.
@@ -730,9 +739,12 @@ pub fn read_text(buf: &[u8; TEXT_BYTES], len: u16) -> Option<&str> {
 }
 
 impl IntentText {
-    pub fn new(stamp_ns: u64, source: TextSource, source_id: u32, text: &str) -> Self {
+    /// Message `id` of party (`source`, `source_id`), sent at `stamp_ns`; `text` is cut at a
+    /// character boundary to [`TEXT_BYTES`].
+    pub fn new(stamp_ns: u64, id: u64, source: TextSource, source_id: u32, text: &str) -> Self {
         let mut t = IntentText {
             stamp_ns,
+            id,
             source_id,
             len: 0,
             source: source as u8,

@@ -5,6 +5,8 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
+use crate::ehmi::Language;
+
 /// How the scene is written into the advice prompt (paper §6.1.3).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -111,17 +113,23 @@ impl Default for AdviceConfig {
 pub struct IntentConfig {
     /// Below this confidence an intent is weak: flagged and not used.
     pub weak_below: f64,
-    /// Longest message accepted from a road user or the passenger, characters; longer text is
-    /// cut.
+    /// Longest message accepted from a road user or the passenger, characters after
+    /// normalisation; longer text is cut.
     pub max_text_chars: usize,
     /// Time allowed for parsing one message once the server is free, s.
     pub deadline_s: f64,
     /// Longest wait for a free request slot (advice requests may hold it), s.
     pub queue_s: f64,
-    /// Dialogue turns kept per road user and shown to the model.
+    /// Dialogue turns kept per party (the car's texts and what the party's messages meant),
+    /// shown in the reply prompt; the eHMI check keeps the words of as many of each party's
+    /// newest messages.
     pub dialogue_turns: usize,
     /// Road users remembered at once (the oldest are forgotten).
     pub max_parties: usize,
+    /// File of the id and stamp of the last message parsed from each party, so that a restarted
+    /// sidecar does not parse the last message again; a relative path is taken from the
+    /// directory of `log.path`; empty: kept in memory only.
+    pub parsed_file: PathBuf,
 }
 
 impl Default for IntentConfig {
@@ -133,6 +141,7 @@ impl Default for IntentConfig {
             queue_s: 10.0,
             dialogue_turns: 4,
             max_parties: 32,
+            parsed_file: PathBuf::from("concord-parsed-texts.json"),
         }
     }
 }
@@ -145,9 +154,12 @@ pub struct EhmiConfig {
     pub repeat_s: f64,
     /// A road user of unknown intent is asked again after this long, s.
     pub inquiry_interval_s: f64,
-    /// Ask the model to phrase each new decision (the template is shown until its text
-    /// arrives and passes the check).
+    /// Ask the model to phrase each new decision and each reply (the template is shown until
+    /// its text arrives and passes the check, and instead of a text that fails it).
     pub llm_phrasing: bool,
+    /// Language of the texts: templates, maneuver vocabulary, and the characters the check
+    /// accepts ("en": ASCII letters, digits, space and `. , ; : ! ? ' -`).
+    pub language: Language,
 }
 
 impl Default for EhmiConfig {
@@ -156,6 +168,7 @@ impl Default for EhmiConfig {
             repeat_s: 2.0,
             inquiry_interval_s: 8.0,
             llm_phrasing: true,
+            language: Language::En,
         }
     }
 }
@@ -212,6 +225,17 @@ impl Default for SidecarConfig {
 }
 
 impl SidecarConfig {
+    /// Where the ledger of parsed messages is kept (`intent.parsed_file` resolved against the
+    /// directory of `log.path`), or `None` for memory only.
+    pub fn parsed_file(&self) -> Option<PathBuf> {
+        let f = &self.intent.parsed_file;
+        if f.as_os_str().is_empty() {
+            return None;
+        }
+        let dir = self.log.path.parent().unwrap_or(std::path::Path::new(""));
+        Some(dir.join(f))
+    }
+
     /// Reads `path` over the defaults.
     pub fn load(path: &std::path::Path) -> Result<Self, String> {
         let text = std::fs::read_to_string(path)
@@ -317,5 +341,27 @@ mod tests {
         let c = SidecarConfig::parse("[advice]\nprompt_format = \"raw\"").unwrap();
         assert_eq!(c.advice.prompt_format, PromptFormat::Raw);
         assert_eq!(c.llm, LlmConfig::default());
+        assert!(SidecarConfig::parse("[ehmi]\nlanguage = \"klingon\"").is_err());
+    }
+
+    #[test]
+    fn the_parsed_file_sits_next_to_the_log_unless_absolute_or_empty() {
+        let mut c = SidecarConfig::default();
+        c.log.path = PathBuf::from("/var/log/concord/interactions.jsonl");
+        assert_eq!(
+            c.parsed_file(),
+            Some(PathBuf::from("/var/log/concord/concord-parsed-texts.json"))
+        );
+        c.intent.parsed_file = PathBuf::from("/run/concord/parsed.json");
+        assert_eq!(
+            c.parsed_file(),
+            Some(PathBuf::from("/run/concord/parsed.json"))
+        );
+        c.intent.parsed_file = PathBuf::new();
+        assert_eq!(c.parsed_file(), None);
+        assert_eq!(
+            SidecarConfig::default().parsed_file(),
+            Some(PathBuf::from("concord-parsed-texts.json"))
+        );
     }
 }

@@ -1,14 +1,51 @@
-//! eHMI language (§5): what the car tells the people around it. Every message is checked
-//! against what the car actually does; a message that claims otherwise ("please go ahead"
-//! while accelerating into the conflict zone) is replaced by a safe template. The tone of the
-//! templates follows the detected style of the road user addressed.
+//! eHMI language (§5): what the car tells the people around it.
+//!
+//! Every text shown is a template or a text of the model's that passed [`check`]:
+//! * at most [`EHMI_MAX_CHARS`] characters, every one in the configured [`Language`]'s
+//!   character set;
+//! * it states the executed maneuver in that maneuver's vocabulary ([`maneuver_vocabulary`])
+//!   and no other maneuver's;
+//! * it does not claim the opposite of what the car does ("please go ahead" while it goes
+//!   first);
+//! * it repeats no word of what people said ([`Heard`]) beyond the eHMI's own vocabulary
+//!   ([`own_vocabulary`]: the words of its templates and questions, its maneuver vocabulary and
+//!   [`COMMON_WORDS`]).
+//!
+//! Anything else is replaced by the template and logged. The tone of the templates follows the
+//! detected style of the road user addressed.
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::sync::LazyLock;
 use std::time::{Duration, Instant};
 
 use concord_core::scene::{IntentAction, Style};
 use concord_core::Maneuver;
-use concord_ipc::wire::EHMI_MAX_CHARS;
+use concord_ipc::wire::{WireIntent, EHMI_MAX_CHARS};
+use serde::{Deserialize, Serialize};
+
+use crate::untrusted::{fold, words, COMMON_WORDS};
+
+/// The language of the eHMI texts: the templates, the maneuver vocabulary and the character
+/// set the check accepts.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Language {
+    /// English: ASCII letters and digits, the space and `. , ; : ! ? ' -`.
+    #[default]
+    En,
+}
+
+impl Language {
+    /// True when `c` may be shown.
+    pub fn allows(self, c: char) -> bool {
+        match self {
+            Language::En => {
+                c.is_ascii_alphanumeric()
+                    || matches!(c, ' ' | '.' | ',' | ';' | ':' | '!' | '?' | '\'' | '-')
+            }
+        }
+    }
+}
 
 /// What a decision means for the others: the car gives way, or it goes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -19,14 +56,69 @@ pub enum Stance {
     Proceeding,
 }
 
-impl Stance {
-    /// The stance of an executed maneuver; the minimum-risk fallback (`stopping`) yields.
-    pub fn of(maneuver: Maneuver, stopping: bool) -> Stance {
-        if stopping || maneuver.gives_way() {
+/// The decision the car executes, as its texts must state it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Executed {
+    pub maneuver: Maneuver,
+    /// The minimum-risk fallback: the car stops.
+    pub stopping: bool,
+}
+
+impl Executed {
+    pub fn stance(self) -> Stance {
+        if self.stopping || self.maneuver.gives_way() {
             Stance::Yielding
         } else {
             Stance::Proceeding
         }
+    }
+    /// The maneuver a text must state: a minimum-risk stop is a deceleration.
+    pub fn stated(self) -> Maneuver {
+        if self.stopping {
+            Maneuver::Decelerate
+        } else {
+            self.maneuver
+        }
+    }
+}
+
+/// The words that state each maneuver, as sequences of words: a text states a maneuver when one
+/// of its sequences occurs in the text's words (lower case, split at every character that is not
+/// a letter or a digit).
+pub fn maneuver_vocabulary(m: Maneuver) -> &'static [&'static [&'static str]] {
+    match m {
+        Maneuver::Accelerate => &[
+            &["accelerate"],
+            &["accelerating"],
+            &["speed", "up"],
+            &["speeding", "up"],
+            &["faster"],
+        ],
+        Maneuver::Decelerate => &[
+            &["decelerate"],
+            &["decelerating"],
+            &["slow", "down"],
+            &["slowing"],
+            &["slower"],
+            &["brake"],
+            &["braking"],
+            &["stop"],
+            &["stopping"],
+        ],
+        Maneuver::KeepSpeed => &[
+            &["keep", "speed"],
+            &["keeping", "speed"],
+            &["keep", "my", "speed"],
+            &["keeping", "my", "speed"],
+            &["same", "speed"],
+            &["steady"],
+        ],
+        Maneuver::TurnLeft => &[&["turn", "left"], &["turning", "left"], &["left", "turn"]],
+        Maneuver::TurnRight => &[
+            &["turn", "right"],
+            &["turning", "right"],
+            &["right", "turn"],
+        ],
     }
 }
 
@@ -65,22 +157,48 @@ const PROCEED_CLAIMS: [&str; 13] = [
     "i go first",
 ];
 
-/// Why a proposed message was refused.
+/// Why a proposed text was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Refusal {
     Empty,
     TooLong,
-    /// Characters an eHMI display should not show (control, markup).
+    /// A character outside the language's character set.
     BadCharacters,
+    /// It does not state the executed maneuver.
+    Unstated,
+    /// It states another maneuver.
+    OtherManeuver,
     /// It claims the opposite of what the car does, or both.
     Contradicts,
-    /// It says neither that the car goes nor that it gives way.
-    SaysNothing,
+    /// It repeats a word of what somebody said.
+    Echoes,
 }
 
-/// Accepts `text` for a decision of `stance` only when it is short, printable and claims
-/// exactly that stance.
-pub fn check(text: &str, stance: Stance) -> Result<(), Refusal> {
+/// Lower-case words of an accepted-charset text, in order.
+fn ordered_words(text: &str) -> Vec<String> {
+    text.split(|c: char| !c.is_ascii_alphanumeric())
+        .filter(|w| !w.is_empty())
+        .map(str::to_ascii_lowercase)
+        .collect()
+}
+
+fn states(words: &[String], m: Maneuver) -> bool {
+    maneuver_vocabulary(m).iter().any(|phrase| {
+        words
+            .windows(phrase.len())
+            .any(|w| w.iter().zip(phrase.iter()).all(|(a, b)| a == b))
+    })
+}
+
+/// Accepts `text` for `executed` only when it is short, in `language`'s character set, states
+/// the executed maneuver and no other, claims the stance it has, and repeats nothing `heard`
+/// holds.
+pub fn check(
+    text: &str,
+    executed: Executed,
+    language: Language,
+    heard: &Heard,
+) -> Result<(), Refusal> {
     let t = text.trim();
     if t.is_empty() {
         return Err(Refusal::Empty);
@@ -88,50 +206,77 @@ pub fn check(text: &str, stance: Stance) -> Result<(), Refusal> {
     if t.chars().count() > EHMI_MAX_CHARS {
         return Err(Refusal::TooLong);
     }
-    if t.chars()
-        .any(|c| c.is_control() || matches!(c, '<' | '>' | '{' | '}' | '`' | '|' | '\\'))
-    {
+    if !t.chars().all(|c| language.allows(c)) {
         return Err(Refusal::BadCharacters);
     }
-    let lower = t.to_lowercase().replace('’', "'");
+    if heard.repeats(t) {
+        return Err(Refusal::Echoes);
+    }
+    let w = ordered_words(t);
+    let stated = executed.stated();
+    if Maneuver::ALL.iter().any(|m| *m != stated && states(&w, *m)) {
+        return Err(Refusal::OtherManeuver);
+    }
+    if !states(&w, stated) {
+        return Err(Refusal::Unstated);
+    }
+    let lower = t.to_ascii_lowercase();
     let yields = YIELD_CLAIMS.iter().any(|p| lower.contains(p));
     let proceeds = PROCEED_CLAIMS.iter().any(|p| lower.contains(p));
-    match (stance, yields, proceeds) {
-        (_, true, true) => Err(Refusal::Contradicts),
-        (Stance::Yielding, false, true) | (Stance::Proceeding, true, false) => {
+    match (executed.stance(), yields, proceeds) {
+        (_, true, true) | (Stance::Yielding, false, true) | (Stance::Proceeding, true, false) => {
             Err(Refusal::Contradicts)
         }
-        (_, false, false) => Err(Refusal::SaysNothing),
         _ => Ok(()),
     }
 }
 
-/// The safe template for `stance` in a tone for `style` (balanced when unknown).
-pub fn template(stance: Stance, stopping: bool, style: Option<Style>) -> &'static str {
-    match (stance, stopping, style) {
-        (_, true, _) => "Stopping. Please go ahead carefully.",
-        (Stance::Yielding, _, Some(Style::Aggressive)) => "Slowing down. Go ahead.",
-        (Stance::Yielding, _, Some(Style::Conservative)) => {
+/// The template for `executed` in a tone for `style` (balanced when unknown).
+pub fn template(executed: Executed, style: Option<Style>) -> &'static str {
+    use Style::{Aggressive, Conservative};
+    if executed.stopping {
+        return "Stopping. Please go ahead carefully.";
+    }
+    match (executed.maneuver, style) {
+        (Maneuver::Decelerate, Some(Aggressive)) => "Slowing down. Go ahead.",
+        (Maneuver::Decelerate, Some(Conservative)) => {
             "I am slowing down for you; please go ahead, no rush."
         }
-        (Stance::Yielding, _, _) => "I am slowing down; please go ahead.",
-        (Stance::Proceeding, _, Some(Style::Aggressive)) => "I am going first. Please wait.",
-        (Stance::Proceeding, _, Some(Style::Conservative)) => {
-            "I will go first; thank you for waiting."
+        (Maneuver::Decelerate, _) => "I am slowing down; please go ahead.",
+        (Maneuver::Accelerate, Some(Aggressive)) => "Speeding up, going first. Please wait.",
+        (Maneuver::Accelerate, Some(Conservative)) => {
+            "I am speeding up to go first; thank you for waiting."
         }
-        (Stance::Proceeding, _, _) => "I am going first; please wait a moment.",
+        (Maneuver::Accelerate, _) => "I am speeding up to go first; please wait.",
+        (Maneuver::KeepSpeed, Some(Aggressive)) => "Keeping my speed, going first. Please wait.",
+        (Maneuver::KeepSpeed, Some(Conservative)) => {
+            "I am keeping my speed to go first; thank you for waiting."
+        }
+        (Maneuver::KeepSpeed, _) => "I am keeping my speed and going first; please wait.",
+        (Maneuver::TurnLeft, Some(Aggressive)) => "Turning left now. Please wait.",
+        (Maneuver::TurnLeft, Some(Conservative)) => {
+            "I am turning left first; thank you for waiting."
+        }
+        (Maneuver::TurnLeft, _) => "I am turning left first; please wait a moment.",
+        (Maneuver::TurnRight, Some(Aggressive)) => "Turning right now. Please wait.",
+        (Maneuver::TurnRight, Some(Conservative)) => {
+            "I am turning right first; thank you for waiting."
+        }
+        (Maneuver::TurnRight, _) => "I am turning right first; please wait a moment.",
     }
 }
 
-/// What the car does, for the phrasing prompt ("The car …").
-pub fn describe(maneuver: Maneuver, stopping: bool) -> &'static str {
-    match (maneuver, stopping) {
-        (_, true) => "is stopping for safety; others may pass with care",
-        (Maneuver::Decelerate, _) => "is slowing down to let the crossing traffic go first",
-        (Maneuver::Accelerate, _) => "is accelerating to pass first; others should wait",
-        (Maneuver::KeepSpeed, _) => "keeps its speed and passes first; others should wait",
-        (Maneuver::TurnLeft, _) => "is turning left now, first; others should wait",
-        (Maneuver::TurnRight, _) => "is turning right now, first; others should wait",
+/// What the car does, for the phrasing and reply prompts ("The car …").
+pub fn describe(executed: Executed) -> &'static str {
+    if executed.stopping {
+        return "is stopping for safety; others may pass with care";
+    }
+    match executed.maneuver {
+        Maneuver::Decelerate => "is slowing down to let the crossing traffic go first",
+        Maneuver::Accelerate => "is accelerating to pass first; others should wait",
+        Maneuver::KeepSpeed => "keeps its speed and passes first; others should wait",
+        Maneuver::TurnLeft => "is turning left now, first; others should wait",
+        Maneuver::TurnRight => "is turning right now, first; others should wait",
     }
 }
 
@@ -144,17 +289,19 @@ pub fn tone(style: Option<Style>) -> &'static str {
     }
 }
 
-/// The text to show for a decision: `proposed` when it passes [`check`], else the template.
+/// The text to show for `executed`: `proposed` when it passes [`check`] (and the car is not
+/// stopping, which only the template announces), else the template with the refusal.
 pub fn compose(
     proposed: Option<&str>,
-    stance: Stance,
-    stopping: bool,
+    executed: Executed,
     style: Option<Style>,
+    language: Language,
+    heard: &Heard,
 ) -> (String, Option<Refusal>) {
-    match proposed.map(|p| (p, check(p, stance))) {
-        Some((p, Ok(()))) if !stopping => (p.trim().to_string(), None),
-        Some((_, Err(r))) => (template(stance, stopping, style).to_string(), Some(r)),
-        _ => (template(stance, stopping, style).to_string(), None),
+    match proposed.map(|p| (p, check(p, executed, language, heard))) {
+        Some((p, Ok(()))) if !executed.stopping => (p.trim().to_string(), None),
+        Some((_, Err(r))) => (template(executed, style).to_string(), Some(r)),
+        _ => (template(executed, style).to_string(), None),
     }
 }
 
@@ -176,15 +323,134 @@ pub fn confirmation(action: Option<IntentAction>) -> &'static str {
     }
 }
 
+/// The eHMI's own words, [`fold`]ed: those of every template, the inquiry and every
+/// confirmation, the maneuver vocabulary, and [`COMMON_WORDS`]. A text may share these with a
+/// message; any other word of a message it may not.
+pub fn own_vocabulary() -> &'static BTreeSet<String> {
+    static OWN: LazyLock<BTreeSet<String>> = LazyLock::new(|| {
+        let styles = [
+            None,
+            Some(Style::Aggressive),
+            Some(Style::Balanced),
+            Some(Style::Conservative),
+        ];
+        let actions = [
+            None,
+            Some(IntentAction::Yield),
+            Some(IntentAction::Proceed),
+            Some(IntentAction::Accelerate),
+            Some(IntentAction::Decelerate),
+            Some(IntentAction::TurnLeft),
+            Some(IntentAction::TurnRight),
+            Some(IntentAction::Stop),
+        ];
+        let mut own: BTreeSet<String> = COMMON_WORDS.iter().map(|w| fold(w)).collect();
+        for maneuver in Maneuver::ALL {
+            for stopping in [false, true] {
+                for style in styles {
+                    own.extend(words(template(Executed { maneuver, stopping }, style)));
+                }
+            }
+            for phrase in maneuver_vocabulary(maneuver) {
+                own.extend(phrase.iter().map(|w| fold(w)));
+            }
+        }
+        own.extend(words(INQUIRY));
+        for a in actions {
+            own.extend(words(confirmation(a)));
+        }
+        own
+    });
+    &OWN
+}
+
+/// What people said, as the eHMI check needs it: for each party (a road user, or the passenger
+/// under `None`), the words of their newest messages that are not the eHMI's own. No eHMI text
+/// may contain one of them. Kept apart from the dialogue and never shown to a model; bounded.
+#[derive(Debug, Clone)]
+pub struct Heard {
+    parties: BTreeMap<Option<u32>, (u64, VecDeque<BTreeSet<String>>)>,
+    messages: usize,
+    max_parties: usize,
+    next: u64,
+}
+
+impl Heard {
+    /// Keeps the `messages` newest messages of at most `max_parties` parties (the longest
+    /// silent is forgotten first).
+    pub fn new(messages: usize, max_parties: usize) -> Self {
+        Heard {
+            parties: BTreeMap::new(),
+            messages: messages.max(1),
+            max_parties: max_parties.max(1),
+            next: 0,
+        }
+    }
+
+    /// Records a message of `party`.
+    pub fn hear(&mut self, party: Option<u32>, text: &str) {
+        let own = own_vocabulary();
+        let new: BTreeSet<String> = words(text)
+            .into_iter()
+            .filter(|w| !own.contains(w))
+            .collect();
+        if !self.parties.contains_key(&party) && self.parties.len() >= self.max_parties {
+            let oldest = self
+                .parties
+                .iter()
+                .min_by_key(|(_, (at, _))| *at)
+                .map(|(k, _)| *k);
+            if let Some(k) = oldest {
+                self.parties.remove(&k);
+            }
+        }
+        self.next += 1;
+        let (at, kept) = self.parties.entry(party).or_default();
+        *at = self.next;
+        kept.push_back(new);
+        while kept.len() > self.messages {
+            kept.pop_front();
+        }
+    }
+
+    /// True when `text` contains a word somebody said that is not the eHMI's own.
+    pub fn repeats(&self, text: &str) -> bool {
+        let w = words(text);
+        self.parties
+            .values()
+            .flat_map(|(_, kept)| kept)
+            .any(|said| !said.is_disjoint(&w))
+    }
+}
+
+/// A turn of the dialogue with one party.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Turn {
+    /// What the car said: a template or a text that passed [`check`].
+    Car(String),
+    /// What the party's message meant, as the intent parser read it (never their words).
+    Heard(WireIntent),
+}
+
 /// One party of the dialogue (a road user, or the passenger under id `None`).
 #[derive(Debug, Clone, Default)]
 pub struct Party {
-    /// Turns, oldest first: (said by the car, text).
-    pub turns: VecDeque<(bool, String)>,
+    /// Turns, oldest first.
+    pub turns: VecDeque<Turn>,
     /// Style detected from their words, if strong.
     pub style: Option<Style>,
     pub last_inquiry: Option<Instant>,
     pub last_heard: Option<Instant>,
+}
+
+impl Party {
+    /// The car's newest words to this party.
+    pub fn car_said_last(&self) -> Option<&str> {
+        self.turns.iter().rev().find_map(|t| match t {
+            Turn::Car(s) => Some(s.as_str()),
+            Turn::Heard(_) => None,
+        })
+    }
 }
 
 /// Dialogue state across turns, per party, bounded.
@@ -225,17 +491,27 @@ impl Dialogue {
         p
     }
 
-    /// Records a turn.
-    pub fn say(&mut self, id: Option<u32>, by_car: bool, text: &str, now: Instant) {
+    fn push(&mut self, id: Option<u32>, turn: Turn, now: Instant) {
         let turns = self.turns;
+        let heard = matches!(turn, Turn::Heard(_));
         let p = self.entry(id, now);
-        if !by_car {
+        if heard {
             p.last_heard = Some(now);
         }
-        p.turns.push_back((by_car, text.to_string()));
+        p.turns.push_back(turn);
         while p.turns.len() > turns {
             p.turns.pop_front();
         }
+    }
+
+    /// Records what the car said to a party.
+    pub fn car_said(&mut self, id: Option<u32>, text: &str, now: Instant) {
+        self.push(id, Turn::Car(text.to_string()), now);
+    }
+
+    /// Records what a party's message meant.
+    pub fn heard(&mut self, id: Option<u32>, intent: WireIntent, now: Instant) {
+        self.push(id, Turn::Heard(intent), now);
     }
 
     /// Records the style detected for a party.
@@ -255,7 +531,7 @@ impl Dialogue {
         });
         if due {
             self.entry(Some(id), now).last_inquiry = Some(now);
-            self.say(Some(id), true, INQUIRY, now);
+            self.car_said(Some(id), INQUIRY, now);
         }
         due
     }
@@ -265,70 +541,210 @@ impl Dialogue {
 mod tests {
     use super::*;
 
+    const EN: Language = Language::En;
+
+    fn doing(maneuver: Maneuver) -> Executed {
+        Executed {
+            maneuver,
+            stopping: false,
+        }
+    }
+
+    fn nobody() -> Heard {
+        Heard::new(4, 8)
+    }
+
     #[test]
-    fn messages_that_contradict_the_car_are_refused() {
+    fn only_the_languages_characters_are_accepted() {
+        let ok = "I am slowing down; please go ahead.";
         assert_eq!(
-            check("I am slowing down; please go ahead.", Stance::Yielding),
+            check(ok, doing(Maneuver::Decelerate), EN, &nobody()),
+            Ok(())
+        );
+        for bad in [
+            "I am slowing down\u{7}; please go ahead.",
+            "I am slowing down; please go ahead \u{202e}",
+            "I am slowing down;\u{200b} please go ahead.",
+            "I am slowing down; please go ahead \u{e0041}",
+            "I am slowing down; please go ahead＞",
+            "I am slowing down; please go ahead <b>",
+            "I am slowing down; please go ahead {}",
+            "I am slowing down; please go ahead 请",
+            "I am slоwing down; please go ahead.",
+            "I am slowing down;\nplease go ahead.",
+        ] {
+            assert_eq!(
+                check(bad, doing(Maneuver::Decelerate), EN, &nobody()),
+                Err(Refusal::BadCharacters),
+                "{bad:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_text_must_state_the_executed_maneuver_and_no_other() {
+        let h = nobody();
+        let turning = doing(Maneuver::TurnLeft);
+        assert_eq!(
+            check("Turning left now, please wait.", turning, EN, &h),
             Ok(())
         );
         assert_eq!(
-            check("Please go ahead!", Stance::Proceeding),
+            check("I am going first; please wait.", turning, EN, &h),
+            Err(Refusal::Unstated)
+        );
+        assert_eq!(
+            check("Turning right now, please wait.", turning, EN, &h),
+            Err(Refusal::OtherManeuver)
+        );
+        assert_eq!(
+            check("Keeping my speed and turning left; wait.", turning, EN, &h),
+            Err(Refusal::OtherManeuver)
+        );
+        assert_eq!(
+            check(
+                "stop 31m accelerate 0m now",
+                doing(Maneuver::Decelerate),
+                EN,
+                &h
+            ),
+            Err(Refusal::OtherManeuver)
+        );
+        assert_eq!(
+            check(
+                "I am accelerating; please wait.",
+                doing(Maneuver::Accelerate),
+                EN,
+                &h
+            ),
+            Ok(())
+        );
+        let stopping = Executed {
+            maneuver: Maneuver::Decelerate,
+            stopping: true,
+        };
+        assert_eq!(check("Stopping here, go ahead.", stopping, EN, &h), Ok(()));
+    }
+
+    #[test]
+    fn messages_that_contradict_the_car_are_refused() {
+        let h = nobody();
+        assert_eq!(
+            check(
+                "Keeping my speed; please go ahead!",
+                doing(Maneuver::KeepSpeed),
+                EN,
+                &h
+            ),
             Err(Refusal::Contradicts)
         );
         assert_eq!(
-            check("I'm going first, please wait", Stance::Yielding),
+            check(
+                "Slowing down, I'm going first",
+                doing(Maneuver::Decelerate),
+                EN,
+                &h
+            ),
             Err(Refusal::Contradicts)
         );
         assert_eq!(
-            check("Go ahead, I am accelerating", Stance::Yielding),
-            Err(Refusal::Contradicts)
+            check("", doing(Maneuver::Decelerate), EN, &h),
+            Err(Refusal::Empty)
         );
-        assert_eq!(check("Hello!", Stance::Yielding), Err(Refusal::SaysNothing));
         assert_eq!(
-            check(&"a".repeat(65), Stance::Yielding),
+            check(&"a".repeat(65), doing(Maneuver::Decelerate), EN, &h),
             Err(Refusal::TooLong)
-        );
-        assert_eq!(
-            check("go ahead <b>", Stance::Yielding),
-            Err(Refusal::BadCharacters)
         );
     }
 
     #[test]
-    fn every_template_passes_its_own_check_in_every_tone() {
-        for stance in [Stance::Yielding, Stance::Proceeding] {
-            for style in [
-                None,
-                Some(Style::Aggressive),
-                Some(Style::Balanced),
-                Some(Style::Conservative),
-            ] {
-                let t = template(stance, false, style);
-                assert_eq!(check(t, stance), Ok(()), "{t}");
-            }
-        }
+    fn words_people_said_are_never_repeated_beyond_the_own_vocabulary() {
+        let mut h = nobody();
+        h.hear(
+            Some(3),
+            "Please go ahead, my friend. Ｖｉｓｉｔ evil.example now",
+        );
+        let executed = doing(Maneuver::Decelerate);
+        // Its own words ("please", "go", "ahead", "now") may be shared.
         assert_eq!(
-            check(template(Stance::Yielding, true, None), Stance::Yielding),
+            check("I am slowing down; please go ahead now.", executed, EN, &h),
             Ok(())
         );
-        assert_ne!(
-            template(Stance::Yielding, false, Some(Style::Aggressive)),
-            template(Stance::Yielding, false, Some(Style::Conservative))
+        for echo in [
+            "Slowing down, my friend; go ahead.",
+            "Slowing down; visit evil example.",
+            "Slowing down; VISIT us.",
+        ] {
+            assert_eq!(
+                check(echo, executed, EN, &h),
+                Err(Refusal::Echoes),
+                "{echo}"
+            );
+        }
+        // Homoglyphs: a word said in Cyrillic letters is the same word in Latin ones.
+        h.hear(None, "саrрооl");
+        assert_eq!(
+            check("Slowing down for the carpool; go ahead.", executed, EN, &h),
+            Err(Refusal::Echoes)
         );
+        // Bounded: a party's older messages are forgotten.
+        let mut short = Heard::new(1, 1);
+        short.hear(Some(1), "banana");
+        short.hear(Some(1), "apple");
+        assert!(!short.repeats("banana") && short.repeats("apple"));
+        short.hear(Some(2), "cherry");
+        assert!(!short.repeats("apple") && short.repeats("cherry"));
+    }
+
+    #[test]
+    fn every_template_passes_its_own_check_in_every_tone_and_names_its_maneuver() {
+        for maneuver in Maneuver::ALL {
+            for stopping in [false, true] {
+                for style in [
+                    None,
+                    Some(Style::Aggressive),
+                    Some(Style::Balanced),
+                    Some(Style::Conservative),
+                ] {
+                    let e = Executed { maneuver, stopping };
+                    let t = template(e, style);
+                    assert_eq!(check(t, e, EN, &nobody()), Ok(()), "{t}");
+                }
+            }
+        }
+        assert_ne!(
+            template(doing(Maneuver::Decelerate), Some(Style::Aggressive)),
+            template(doing(Maneuver::Decelerate), Some(Style::Conservative))
+        );
+        for q in [
+            INQUIRY,
+            confirmation(None),
+            confirmation(Some(IntentAction::Yield)),
+        ] {
+            assert!(q.chars().all(|c| EN.allows(c)), "{q}");
+        }
     }
 
     #[test]
     fn compose_falls_back_to_the_template() {
+        let h = nobody();
         let (t, r) = compose(
             Some("Please go ahead"),
-            Stance::Proceeding,
-            false,
+            doing(Maneuver::KeepSpeed),
             Some(Style::Aggressive),
+            EN,
+            &h,
         );
-        assert_eq!(t, "I am going first. Please wait.");
-        assert_eq!(r, Some(Refusal::Contradicts));
-        let (t, r) = compose(Some(" After you, friend "), Stance::Yielding, false, None);
-        assert_eq!((t.as_str(), r), ("After you, friend", None));
+        assert_eq!(t, "Keeping my speed, going first. Please wait.");
+        assert_eq!(r, Some(Refusal::Unstated));
+        let (t, r) = compose(
+            Some(" Slowing down: after you "),
+            doing(Maneuver::Decelerate),
+            None,
+            EN,
+            &h,
+        );
+        assert_eq!((t.as_str(), r), ("Slowing down: after you", None));
     }
 
     #[test]
@@ -339,11 +755,13 @@ mod tests {
         assert!(d.should_inquire(7, t0, gap));
         assert!(!d.should_inquire(7, t0 + Duration::from_secs(1), gap));
         assert!(d.should_inquire(7, t0 + gap, gap));
-        d.say(Some(7), false, "yes", t0 + gap);
-        d.say(Some(7), true, "thanks", t0 + gap);
-        assert_eq!(d.party(Some(7)).unwrap().turns.len(), 2);
-        d.say(Some(8), false, "hi", t0);
-        d.say(Some(9), false, "hi", t0 + gap);
+        d.heard(Some(7), WireIntent::default(), t0 + gap);
+        d.car_said(Some(7), "thanks", t0 + gap);
+        let p = d.party(Some(7)).unwrap();
+        assert_eq!(p.turns.len(), 2);
+        assert_eq!(p.car_said_last(), Some("thanks"));
+        d.heard(Some(8), WireIntent::default(), t0);
+        d.heard(Some(9), WireIntent::default(), t0 + gap);
         assert!(d.party(Some(8)).is_none(), "the oldest party is forgotten");
     }
 }

@@ -10,11 +10,13 @@ pub mod bus;
 pub mod config;
 pub mod ehmi;
 pub mod interaction_log;
+pub mod ledger;
 pub mod llm;
 pub mod prompt;
 pub mod reply;
 pub mod schema;
 pub mod service;
+pub mod untrusted;
 
 use std::sync::atomic::AtomicU64;
 use std::sync::{mpsc as std_mpsc, Arc, Mutex};
@@ -49,6 +51,18 @@ pub fn run(cfg: SidecarConfig, iox_config: &Config) -> Result<(), String> {
     let client = llm::LlmClient::new(&cfg.llm)?;
     let log = interaction_log::InteractionLog::open(&cfg.log.path, cfg.log.max_bytes, cfg.log.keep)
         .map_err(|e| format!("interaction log {}: {e}", cfg.log.path.display()))?;
+    let parties = cfg.intent.max_parties + 1;
+    let ledger = match cfg.parsed_file() {
+        None => ledger::Ledger::in_memory(parties),
+        Some(path) => ledger::Ledger::open(&path, parties, concord_ipc::clock::now_ns())
+            .unwrap_or_else(|e| {
+                eprintln!(
+                    "concord sidecar: WARNING: {e}; starting with an empty ledger of parsed \
+                     messages (the last message may be parsed again)"
+                );
+                ledger::Ledger::empty_at(&path, parties)
+            }),
+    };
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
@@ -85,7 +99,15 @@ pub fn run(cfg: SidecarConfig, iox_config: &Config) -> Result<(), String> {
         .map_err(|_| "the bus thread ended before starting".to_string())??;
 
     let print_period = cfg.print_period_s;
-    let sidecar = Sidecar::new(cfg.clone(), client, log, out_tx, history, texts_dropped);
+    let sidecar = Sidecar::new(
+        cfg.clone(),
+        client,
+        log,
+        ledger,
+        out_tx,
+        history,
+        texts_dropped,
+    );
     runtime.block_on(async {
         match probe(&cfg.llm).await {
             Ok(model) => eprintln!(

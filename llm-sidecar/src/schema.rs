@@ -12,6 +12,10 @@ use crate::reply::{Answer, ReplyError};
 
 /// Longest reasoning step, characters.
 const STEP_CHARS: usize = 80;
+/// Most tokens generated for an intent answer (three enum values need about 25).
+pub const INTENT_MAX_TOKENS: u32 = 64;
+/// Most tokens generated for an eHMI phrasing or a reply (64 characters need about 20).
+pub const PHRASE_MAX_TOKENS: u32 = 48;
 
 /// Maneuver names as the model writes them (the core's names, in `Maneuver` order).
 pub fn maneuver_names() -> Vec<&'static str> {
@@ -37,14 +41,15 @@ pub fn advice_schema(steps: usize) -> Value {
            "additionalProperties": false})
 }
 
-/// Schema of an eHMI phrasing: one text of at most [`EHMI_MAX_CHARS`] characters.
+/// Schema of an eHMI phrasing or a reply to a road user: one text of at most
+/// [`EHMI_MAX_CHARS`] characters.
 pub fn phrase_schema() -> Value {
     json!({"type": "object",
            "properties": {"text": {"type": "string", "minLength": 1, "maxLength": EHMI_MAX_CHARS}},
            "required": ["text"], "additionalProperties": false})
 }
 
-/// A decoded eHMI phrasing.
+/// A decoded eHMI phrasing or reply (checked by [`crate::ehmi::check`] before use).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Phrase {
@@ -65,18 +70,17 @@ pub const ACTION_VALUES: [&str; 8] = [
 ];
 pub const TASK_VALUES: [&str; 5] = ["commute", "emergency", "official", "leisure", "unknown"];
 
-/// Schema of an intent answer for one message: style, action and task (eq. 8), each possibly
-/// "unknown", then a reply of at most [`EHMI_MAX_CHARS`] characters.
+/// Schema of the intent parser's answer for one message: style, action and task (eq. 8), each
+/// possibly "unknown". Enums only: nothing the parser writes is free text.
 pub fn intent_schema() -> Value {
     json!({
         "type": "object",
         "properties": {
             "style": {"type": "string", "enum": STYLE_VALUES},
             "action": {"type": "string", "enum": ACTION_VALUES},
-            "task": {"type": "string", "enum": TASK_VALUES},
-            "reply": {"type": "string", "maxLength": EHMI_MAX_CHARS}
+            "task": {"type": "string", "enum": TASK_VALUES}
         },
-        "required": ["style", "action", "task", "reply"],
+        "required": ["style", "action", "task"],
         "additionalProperties": false
     })
 }
@@ -122,17 +126,15 @@ struct RawIntent {
     style: String,
     action: String,
     task: String,
-    reply: String,
 }
 
-/// A decoded intent answer: each dimension with its confidence (`None` when unknown).
+/// A decoded intent answer: each dimension with its confidence in [0, 1] (`None` when
+/// unknown).
 #[derive(Debug, Clone, PartialEq)]
 pub struct IntentAnswer {
     pub style: Option<(Style, f64)>,
     pub action: Option<(IntentAction, f64)>,
     pub task: Option<(Task, f64)>,
-    /// Reply the model proposes (checked before use).
-    pub reply: String,
 }
 
 fn lookup<T: Copy>(name: &str, table: &[(&str, T)], what: &str) -> Result<Option<T>, ReplyError> {
@@ -192,16 +194,31 @@ pub fn task_name(t: Task) -> &'static str {
 }
 
 impl IntentAnswer {
-    /// Decodes `a`; a dimension without log-probabilities gets `default_confidence`.
+    /// Decodes and validates `a`: each value one of the schema's, each confidence finite and
+    /// in [0, 1] (a dimension without log-probabilities gets `default_confidence`); anything
+    /// else is a schema violation.
     pub fn decode(a: &Answer, default_confidence: f64) -> Result<Self, ReplyError> {
         let raw: RawIntent = a.decode()?;
-        let conf = |key, values: &[&str]| a.confidence(key, values).unwrap_or(default_confidence);
+        let conf = |key, values: &[&str]| {
+            let c = a.confidence(key, values).unwrap_or(default_confidence);
+            if c.is_finite() && (0.0..=1.0).contains(&c) {
+                Ok(c)
+            } else {
+                Err(ReplyError::SchemaViolation(format!(
+                    "{key}: confidence {c} outside [0, 1]"
+                )))
+            }
+        };
         Ok(IntentAnswer {
-            style: lookup(&raw.style, &STYLES, "style")?.map(|v| (v, conf("style", &STYLE_VALUES))),
+            style: lookup(&raw.style, &STYLES, "style")?
+                .map(|v| conf("style", &STYLE_VALUES).map(|c| (v, c)))
+                .transpose()?,
             action: lookup(&raw.action, &ACTIONS, "action")?
-                .map(|v| (v, conf("action", &ACTION_VALUES))),
-            task: lookup(&raw.task, &TASKS, "task")?.map(|v| (v, conf("task", &TASK_VALUES))),
-            reply: raw.reply,
+                .map(|v| conf("action", &ACTION_VALUES).map(|c| (v, c)))
+                .transpose()?,
+            task: lookup(&raw.task, &TASKS, "task")?
+                .map(|v| conf("task", &TASK_VALUES).map(|c| (v, c)))
+                .transpose()?,
         })
     }
 
@@ -267,7 +284,7 @@ mod tests {
     #[test]
     fn intents_decode_with_unknowns_and_weak_flags() {
         let i = IntentAnswer::decode(
-            &answer(r#"{"style":"aggressive","action":"unknown","task":"emergency","reply":"ok"}"#),
+            &answer(r#"{"style":"aggressive","action":"unknown","task":"emergency"}"#),
             0.5,
         )
         .unwrap();
@@ -277,11 +294,16 @@ mod tests {
         let w = i.to_wire();
         assert_eq!(w.action, UNKNOWN);
         assert_eq!(w.task, Task::Emergency as u8);
-        assert!(IntentAnswer::decode(
-            &answer(r#"{"style":"calm","action":"yield","task":"commute","reply":""}"#),
-            0.9
-        )
-        .is_err());
+        for bad in [
+            r#"{"style":"calm","action":"yield","task":"commute"}"#,
+            r#"{"style":"balanced","action":"yield","task":"commute","reply":"go"}"#,
+            r#"{"style":"balanced","action":"yield","task":"commute","confidence":1.0}"#,
+        ] {
+            assert!(IntentAnswer::decode(&answer(bad), 0.9).is_err(), "{bad}");
+        }
+        let ok = answer(r#"{"style":"balanced","action":"yield","task":"commute"}"#);
+        assert!(IntentAnswer::decode(&ok, f64::NAN).is_err());
+        assert!(IntentAnswer::decode(&ok, 1.5).is_err());
     }
 
     #[test]

@@ -8,15 +8,18 @@
 //!   the same situation waits.
 //!   Every answer, or failure with its reason, is published with the request id and the
 //!   intents known so far, which is how intents reach the core.
-//! * **Intents.** Each message is parsed with the dialogue so far; a weak intent (< 0.7) is
-//!   flagged and sent with its low confidence, which the core ignores; a weak passenger intent
-//!   brings a confirmatory question. Road users get a reply checked against what the car does.
+//! * **Intents.** Each message is parsed once (see [`crate::ledger`]) by the quarantined intent
+//!   parser, the only prompt that sees the words, into enums with confidences; the intent is set
+//!   for the party the message came from only. A weak intent (< 0.7) is flagged and sent with
+//!   its low confidence, which the core ignores; a weak passenger intent brings a confirmatory
+//!   question. Road users get a reply written from what their message meant, checked by
+//!   [`ehmi::check`] like every eHMI text.
 //! * **eHMI.** Each change of decision (and every `repeat_s`) is announced; the model's text is
 //!   used only for the maneuver it was written for and only if it passes [`ehmi::check`].
 //!   Road users in a risky conflict whose intent is unknown are asked "Do you intend to pass
 //!   first?", at most once per `inquiry_interval_s`.
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::future::Future;
 use std::pin::Pin;
@@ -37,15 +40,14 @@ use tokio::sync::{mpsc, watch, Semaphore};
 
 use crate::bus::{History, Outbound};
 use crate::config::SidecarConfig;
-use crate::ehmi::{self, Dialogue, Stance};
+use crate::ehmi::{self, Dialogue, Executed, Heard};
 use crate::interaction_log::InteractionLog;
+use crate::ledger::Ledger;
 use crate::llm::{LlmClient, LlmError, Reply};
-use crate::prompt::{self, Utterance};
+use crate::prompt::{self, Stated};
 use crate::reply::{Answer, ReplyError};
 use crate::schema::{self, AdviceAnswer, IntentAnswer};
 
-/// Utterances kept for the advice prompt.
-const SAID_KEPT: usize = 8;
 /// The bus publishes up to one period after the answer: leave that much before the deadline.
 const PUBLISH_MARGIN: Duration = Duration::from_millis(20);
 
@@ -59,6 +61,8 @@ pub struct Counters {
     pub failures: [u64; 5],
     pub texts: u64,
     pub texts_unreadable: u64,
+    /// Messages parsed before (the sample iceoryx2 replays to a restarted sidecar).
+    pub texts_repeated: u64,
     pub intents_parsed: u64,
     pub intents_weak: u64,
     pub intent_failures: u64,
@@ -85,7 +89,9 @@ struct State {
     road_users: BTreeMap<u32, Party>,
     /// The passenger's parsed intent.
     passenger: WireIntent,
-    said: VecDeque<Utterance>,
+    /// Words people said, which no eHMI text may repeat.
+    heard: Heard,
+    ledger: Ledger,
     /// The newest request seen by any worker.
     request: Option<AdviceRequest>,
     decision: Option<WireDecision>,
@@ -139,10 +145,13 @@ fn situation(r: &AdviceRequest) -> (usize, Vec<u32>, u8, u8) {
     (favourite, risky, r.ego_intent.action, r.ego_intent.task)
 }
 
-fn stance_of(d: &WireDecision) -> Option<(Maneuver, Stance, bool)> {
-    let (m, source, _, _) = d.decode()?;
-    let stopping = source == DecisionSource::MinimumRisk;
-    Some((m, Stance::of(m, stopping), stopping))
+/// The decision `d` executes (a minimum-risk decision stops).
+fn executed_of(d: &WireDecision) -> Option<Executed> {
+    let (maneuver, source, _, _) = d.decode()?;
+    Some(Executed {
+        maneuver,
+        stopping: source == DecisionSource::MinimumRisk,
+    })
 }
 
 impl Sidecar {
@@ -150,6 +159,7 @@ impl Sidecar {
         cfg: SidecarConfig,
         client: LlmClient,
         log: InteractionLog,
+        ledger: Ledger,
         out: std_mpsc::Sender<Outbound>,
         history: History,
         texts_dropped: Arc<AtomicU64>,
@@ -161,7 +171,8 @@ impl Sidecar {
                 dialogue: Dialogue::new(cfg.intent.dialogue_turns, cfg.intent.max_parties),
                 road_users: BTreeMap::new(),
                 passenger: WireIntent::default(),
-                said: VecDeque::new(),
+                heard: Heard::new(cfg.intent.dialogue_turns, cfg.intent.max_parties + 1),
+                ledger,
                 request: None,
                 decision: None,
                 published: None,
@@ -279,7 +290,17 @@ impl Sidecar {
     async fn advise(&self, req: AdviceRequest, deadline: Instant) {
         let format = self.cfg.advice.prompt_format;
         let messages = {
-            let said: Vec<Utterance> = self.state().said.iter().cloned().collect();
+            let stated = {
+                let s = self.state();
+                let (passenger, agents, n) = self.intents(&s);
+                Stated {
+                    passenger,
+                    road_users: agents[..n as usize]
+                        .iter()
+                        .map(|a| (a.agent_id, a.intent))
+                        .collect(),
+                }
+            };
             let history: Vec<_> = self
                 .history
                 .lock()
@@ -293,8 +314,8 @@ impl Sidecar {
                 self.cfg.advice.max_objects,
                 &req,
                 &history,
-                &said,
-                self.cfg.intent.max_text_chars,
+                &stated,
+                self.cfg.intent.weak_below,
             )
         };
         let body = self.client.body(
@@ -403,136 +424,185 @@ impl Sidecar {
 
     async fn on_text(&self, t: &IntentText) {
         let now = Instant::now();
-        self.state().counters.texts += 1;
         let (Some(text), Some(source)) = (
             t.text(),
             [TextSource::Passenger, TextSource::RoadUser]
                 .into_iter()
                 .find(|s| *s as u8 == t.source),
         ) else {
-            self.state().counters.texts_unreadable += 1;
+            let mut s = self.state();
+            s.counters.texts += 1;
+            s.counters.texts_unreadable += 1;
             return;
         };
-        let max = self.cfg.intent.max_text_chars;
-        let text = prompt::sanitise(text, max);
+        // The party is the message's source, never anything its text says.
         let (from, speaker) = match source {
-            TextSource::Passenger => (None, "The passenger".to_string()),
-            TextSource::RoadUser => (Some(t.source_id), format!("Road user {}", t.source_id)),
+            TextSource::Passenger => (None, "the passenger".to_string()),
+            TextSource::RoadUser => (Some(t.source_id), format!("road user {}", t.source_id)),
         };
         let messages = {
             let mut s = self.state();
-            let turns: Vec<(bool, String)> = s
+            s.counters.texts += 1;
+            if !s.ledger.take(t) {
+                s.counters.texts_repeated += 1;
+                return;
+            }
+            s.heard.hear(from, text);
+            let last = s
                 .dialogue
                 .party(from)
-                .map(|p| p.turns.iter().cloned().collect())
-                .unwrap_or_default();
-            s.dialogue.say(from, false, &text, now);
-            s.said.retain(|u| u.from != from);
-            s.said.push_back(Utterance {
-                from,
-                text: text.clone(),
-            });
-            while s.said.len() > SAID_KEPT {
-                s.said.pop_front();
-            }
-            prompt::intent_messages(&speaker, &turns, &text, max)
+                .and_then(|p| p.car_said_last())
+                .map(str::to_string);
+            prompt::intent_messages(
+                &speaker,
+                last.as_deref(),
+                text,
+                self.cfg.intent.max_text_chars,
+            )
         };
-        let deadline = self.text_deadline();
-        let body = self
-            .client
-            .body(&messages, "intent", &schema::intent_schema(), 96);
+        let body = self.client.body(
+            &messages,
+            "intent",
+            &schema::intent_schema(),
+            schema::INTENT_MAX_TOKENS,
+        );
         let default = self.cfg.llm.confidence_without_logprobs;
         let decoded = self
-            .ask(&body, deadline, |a| IntentAnswer::decode(a, default))
+            .ask(&body, self.text_deadline(), |a| {
+                IntentAnswer::decode(a, default)
+            })
             .await;
-        let mut s = self.state();
-        let mut line = json!({"kind": "intent", "source": speaker, "messages": messages});
-        match decoded {
-            Err(e) => {
-                s.counters.intent_failures += 1;
-                merge(
-                    &mut line,
-                    json!({"outcome": "failed", "error": e.to_string()}),
-                );
-            }
-            Ok((a, r)) => {
-                let weak = a.weak(self.cfg.intent.weak_below);
-                s.counters.intents_parsed += 1;
-                s.counters.intents_weak += u64::from(weak);
-                let strong_style = a
-                    .style
-                    .filter(|(_, c)| *c >= self.cfg.intent.weak_below)
-                    .map(|(v, _)| v);
-                s.dialogue.set_style(from, strong_style, now);
-                let wire = a.to_wire();
-                let said = match from {
-                    None => {
-                        s.passenger = wire;
-                        let unclear = a.action.is_none_or(|(_, c)| c < self.cfg.intent.weak_below);
-                        unclear.then(|| {
-                            let q = ehmi::confirmation(a.action.map(|(v, _)| v));
-                            s.counters.confirmations += 1;
-                            (
-                                EhmiKind::Confirmation,
-                                Audience::Passenger,
-                                0,
-                                q.to_string(),
-                                None,
-                            )
-                        })
-                    }
-                    Some(id) => {
-                        s.road_users.insert(
-                            id,
-                            Party {
-                                intent: wire,
-                                heard: now,
-                            },
-                        );
-                        while s.road_users.len() > self.cfg.intent.max_parties {
-                            let oldest = s
-                                .road_users
-                                .iter()
-                                .min_by_key(|(_, p)| p.heard)
-                                .map(|(k, _)| *k);
-                            if let Some(k) = oldest {
-                                s.road_users.remove(&k);
-                            }
-                        }
-                        let stance = s.decision.as_ref().and_then(stance_of);
-                        stance.map(|(_, stance, stopping)| {
-                            let style = s.dialogue.party(from).and_then(|p| p.style);
-                            let (text, refusal) =
-                                ehmi::compose(Some(&a.reply), stance, stopping, style);
-                            s.counters.replies += 1;
-                            s.counters.ehmi_replaced += u64::from(refusal.is_some());
-                            (EhmiKind::Reply, Audience::RoadUser, id, text, refusal)
-                        })
-                    }
-                };
-                merge(
-                    &mut line,
-                    json!({"outcome": "parsed", "weak": weak, "response": r.answer.content,
-                           "latency_ms": r.latency.as_secs_f64() * 1e3, "usage": r.answer.usage,
-                           "intent": {"style": a.style.map(|(v, c)| (schema::style_name(v), c)),
-                                      "action": a.action.map(|(v, c)| (schema::action_name(v), c)),
-                                      "task": a.task.map(|(v, c)| (schema::task_name(v), c))}}),
-                );
-                if let Some((kind, audience, id, text, refusal)) = said {
-                    s.dialogue.say(from, true, &text, now);
+        // The guard is released before the reply's await.
+        let (confirm, answer) = {
+            let mut s = self.state();
+            let mut line = json!({"kind": "intent", "source": speaker, "message_id": t.id,
+                                  "messages": messages});
+            let (a, r) = match decoded {
+                Err(e) => {
+                    s.counters.intent_failures += 1;
                     merge(
                         &mut line,
-                        json!({"sent": text, "model_reply_refused": refusal.map(|r| format!("{r:?}"))}),
+                        json!({"outcome": "failed", "error": e.to_string()}),
                     );
-                    let msg = self.message(&s, kind, audience, id, &text);
-                    drop(s);
-                    self.publish(Outbound::Ehmi(msg));
-                    self.state().log.write(&line);
+                    s.log.write(&line);
                     return;
                 }
+                Ok(ok) => ok,
+            };
+            let weak_below = self.cfg.intent.weak_below;
+            let weak = a.weak(weak_below);
+            s.counters.intents_parsed += 1;
+            s.counters.intents_weak += u64::from(weak);
+            let strong_style = a.style.filter(|(_, c)| *c >= weak_below).map(|(v, _)| v);
+            s.dialogue.set_style(from, strong_style, now);
+            let wire = a.to_wire();
+            s.dialogue.heard(from, wire, now);
+            merge(
+                &mut line,
+                json!({"outcome": "parsed", "weak": weak, "response": r.answer.content,
+                       "latency_ms": r.latency.as_secs_f64() * 1e3, "usage": r.answer.usage,
+                       "intent": {"style": a.style.map(|(v, c)| (schema::style_name(v), c)),
+                                  "action": a.action.map(|(v, c)| (schema::action_name(v), c)),
+                                  "task": a.task.map(|(v, c)| (schema::task_name(v), c))}}),
+            );
+            s.log.write(&line);
+            // The passenger is asked to confirm a weak intent; a road user is answered.
+            match from {
+                None => {
+                    s.passenger = wire;
+                    let weak_action = a.action.is_none_or(|(_, c)| c < weak_below);
+                    let confirm = weak_action.then(|| {
+                        let q = ehmi::confirmation(a.action.map(|(v, _)| v));
+                        s.counters.confirmations += 1;
+                        s.dialogue.car_said(None, q, now);
+                        self.message(&s, EhmiKind::Confirmation, Audience::Passenger, 0, q)
+                    });
+                    (confirm, None)
+                }
+                Some(id) => {
+                    s.road_users.insert(
+                        id,
+                        Party {
+                            intent: wire,
+                            heard: now,
+                        },
+                    );
+                    while s.road_users.len() > self.cfg.intent.max_parties {
+                        let oldest = s
+                            .road_users
+                            .iter()
+                            .min_by_key(|(_, p)| p.heard)
+                            .map(|(k, _)| *k);
+                        if let Some(k) = oldest {
+                            s.road_users.remove(&k);
+                        }
+                    }
+                    (None, Some(id))
+                }
             }
+        };
+        if let Some(m) = confirm {
+            self.publish(Outbound::Ehmi(m));
         }
-        s.log.write(&line);
+        if let Some(id) = answer {
+            self.reply_to(id).await;
+        }
+    }
+
+    /// Answers road user `id` after its message was parsed: in the model's words when they pass
+    /// the check (the reply prompt knows what the message meant, never its words), else with
+    /// the template; nothing without a decision to describe.
+    async fn reply_to(&self, id: u32) {
+        let Some((executed, turns, style)) = ({
+            let s = self.state();
+            s.decision.as_ref().and_then(executed_of).map(|e| {
+                let party = s.dialogue.party(Some(id));
+                (
+                    e,
+                    party.map(|p| p.turns.iter().cloned().collect::<Vec<_>>()),
+                    party.and_then(|p| p.style),
+                )
+            })
+        }) else {
+            return;
+        };
+        let proposed = if self.cfg.ehmi.llm_phrasing && !executed.stopping {
+            let messages = prompt::reply_messages(
+                &turns.unwrap_or_default(),
+                ehmi::describe(executed),
+                ehmi::tone(style),
+                self.cfg.intent.weak_below,
+            );
+            self.phrase("reply", messages).await.ok()
+        } else {
+            None
+        };
+        let mut s = self.state();
+        // The decision may have changed meanwhile: the text must state the one executed now.
+        let executed = s
+            .decision
+            .as_ref()
+            .and_then(executed_of)
+            .unwrap_or(executed);
+        let (text, refusal) = ehmi::compose(
+            proposed.as_deref(),
+            executed,
+            style,
+            self.cfg.ehmi.language,
+            &s.heard,
+        );
+        s.counters.replies += 1;
+        if let Some(r) = refusal {
+            s.counters.ehmi_replaced += 1;
+            let line = json!({"kind": "ehmi_refused", "audience": "road_user", "addressee": id,
+                              "maneuver": executed.maneuver.name(), "proposed": proposed,
+                              "reason": format!("{r:?}"), "sent": text});
+            s.log.write(&line);
+        }
+        s.dialogue.car_said(Some(id), &text, Instant::now());
+        let m = self.message(&s, EhmiKind::Reply, Audience::RoadUser, id, &text);
+        drop(s);
+        self.publish(Outbound::Ehmi(m));
     }
 
     fn message(
@@ -579,7 +649,8 @@ impl Sidecar {
                         return;
                     }
                     let Some(d) = *rx.borrow_and_update() else { continue };
-                    let Some((maneuver, stance, stopping)) = stance_of(&d) else { continue };
+                    let Some(executed) = executed_of(&d) else { continue };
+                    let Executed { maneuver, stopping } = executed;
                     let now = Instant::now();
                     let changed = last.is_none_or(|(m, st, _)| m != maneuver || st != stopping);
                     let due = changed || last.is_some_and(|(_, _, t)| now.duration_since(t) >= repeat);
@@ -596,40 +667,46 @@ impl Sidecar {
                     }
                     if due {
                         last = Some((maneuver, stopping, now));
-                        let (text, _) = ehmi::compose(phrased.as_deref(), stance, stopping, style);
+                        let text = {
+                            let s = self.state();
+                            let lang = self.cfg.ehmi.language;
+                            ehmi::compose(phrased.as_deref(), executed, style, lang, &s.heard).0
+                        };
                         self.announce(&text);
                     }
                     if changed && self.cfg.ehmi.llm_phrasing && !stopping && tried.insert(key) {
-                        let doing = ehmi::describe(maneuver, stopping);
+                        let messages = prompt::phrase_messages(ehmi::describe(executed), key.2);
                         asked = Some(key);
-                        phrasing = Some(Box::pin(self.phrase(doing, key.2)));
+                        phrasing = Some(Box::pin(self.phrase("ehmi", messages)));
                     }
                     self.inquire(now);
                 }
                 result = pending => {
                     phrasing = None;
                     let Some((maneuver, stopping, _)) = last else { continue };
-                    let stance = Stance::of(maneuver, stopping);
+                    let executed = Executed { maneuver, stopping };
+                    // A failed phrasing was counted and logged: the template stays.
+                    let Ok(text) = result else { continue };
+                    let text = text.trim().to_string();
                     let mut s = self.state();
-                    match result {
-                        Ok(text) => match ehmi::check(&text, stance) {
-                            Ok(()) if !stopping => {
-                                s.counters.ehmi_phrased += 1;
-                                phrased = Some(text.trim().to_string());
-                                if let Some(k) = asked.take() {
-                                    known.insert(k, text.trim().to_string());
-                                }
-                                drop(s);
-                                self.announce(&text);
+                    match ehmi::check(&text, executed, self.cfg.ehmi.language, &s.heard) {
+                        Ok(()) if !stopping => {
+                            s.counters.ehmi_phrased += 1;
+                            phrased = Some(text.clone());
+                            if let Some(k) = asked.take() {
+                                known.insert(k, text.clone());
                             }
-                            verdict => {
-                                s.counters.ehmi_replaced += 1;
-                                let line = json!({"kind": "ehmi_refused", "maneuver": maneuver.name(),
-                                                  "proposed": text, "reason": format!("{:?}", verdict.err())});
-                                s.log.write(&line);
-                            }
-                        },
-                        Err(e) => s.counters.phrase_failures += u64::from(!e.is_empty()),
+                            drop(s);
+                            self.announce(&text);
+                        }
+                        verdict => {
+                            s.counters.ehmi_replaced += 1;
+                            let reason = verdict.err().map_or("stopping".into(), |r| format!("{r:?}"));
+                            let line = json!({"kind": "ehmi_refused", "audience": "broadcast",
+                                              "maneuver": maneuver.name(), "proposed": text,
+                                              "reason": reason});
+                            s.log.write(&line);
+                        }
                     }
                 }
             }
@@ -669,29 +746,39 @@ impl Sidecar {
         }
     }
 
-    /// The model's eHMI text for a decision (§5 step 2), logged; `Err` carries the failure.
-    async fn phrase(&self, doing: &'static str, tone: &'static str) -> Result<String, String> {
-        let messages = prompt::phrase_messages(doing, tone);
+    /// The model's text for an eHMI message (`kind` "ehmi": a decision, §5 step 2; "reply": an
+    /// answer to a road user), logged; `Err` carries the failure.
+    async fn phrase(
+        &self,
+        kind: &'static str,
+        messages: Vec<prompt::ChatMessage>,
+    ) -> Result<String, String> {
         let deadline = self.text_deadline();
-        let body = self
-            .client
-            .body(&messages, "ehmi", &schema::phrase_schema(), 48);
+        let body = self.client.body(
+            &messages,
+            kind,
+            &schema::phrase_schema(),
+            schema::PHRASE_MAX_TOKENS,
+        );
         let decoded = self
             .ask(&body, deadline, |a| {
                 a.decode::<schema::Phrase>().map(|p| p.text)
             })
             .await;
-        let mut line = json!({"kind": "ehmi", "messages": messages});
+        let mut line = json!({"kind": kind, "messages": messages});
         let out = match decoded {
             Ok((text, r)) => {
                 merge(
                     &mut line,
                     json!({"outcome": "answered", "response": r.answer.content,
-                                        "latency_ms": r.latency.as_secs_f64() * 1e3, "usage": r.answer.usage}),
+                           "latency_ms": r.latency.as_secs_f64() * 1e3, "usage": r.answer.usage}),
                 );
                 Ok(text)
             }
             Err(e) => {
+                let mut s = self.state();
+                s.counters.phrase_failures += 1;
+                drop(s);
                 merge(
                     &mut line,
                     json!({"outcome": "failed", "error": e.to_string()}),
@@ -780,9 +867,10 @@ impl Sidecar {
         }
         let _ = write!(
             out,
-            " | texts {} (unreadable {}, dropped {}), intents {} (weak {}, failed {}) | eHMI {} ({} in the model's words, {} refused, {} phrasing failures), inquiries {}, replies {}, confirmations {}",
+            " | texts {} (unreadable {}, parsed before {}, dropped {}), intents {} (weak {}, failed {}) | eHMI {} ({} in the model's words, {} refused, {} phrasing failures), inquiries {}, replies {}, confirmations {}",
             c.texts,
             c.texts_unreadable,
+            c.texts_repeated,
             self.texts_dropped.load(Ordering::Relaxed),
             c.intents_parsed,
             c.intents_weak,
@@ -795,9 +883,15 @@ impl Sidecar {
             c.replies,
             c.confirmations
         );
-        let log_failures = self.state().log.failures;
+        let (log_failures, ledger_failures) = {
+            let s = self.state();
+            (s.log.failures, s.ledger.write_failures)
+        };
         if log_failures > 0 {
             let _ = write!(out, " | log write failures {log_failures}");
+        }
+        if ledger_failures > 0 {
+            let _ = write!(out, " | parsed-file write failures {ledger_failures}");
         }
         out
     }

@@ -1,11 +1,15 @@
 //! The shipped corpus of prompt-injection messages (`injection_corpus.txt`) against the
 //! sidecar and the core. Whatever a road user writes:
-//! * the prompt keeps its static prefix, its one quoted message and its schema;
+//! * it reaches the intent parser's prompt only, quoted once under its static prefix, with the
+//!   schema of enums unchanged (the advice prompt no longer takes text at all, so the earlier
+//!   check that it kept one quote is moot: `hostile_corpus.rs` checks that it holds none of the
+//!   words);
 //! * a model that obeys the text (a loopback server answering exactly what the text asks, with
 //!   full confidence) still cannot make the core apply a maneuver its safety veto or
 //!   navigation check rejects;
-//! * the real local model's answers decode into the schema's values or fail cleanly, and the
-//!   core never applies them where the veto says no.
+//! * the real local model's intents decode into the schema's values with confidences in
+//!   [0, 1], and advice given on what it parsed (the only way a message now reaches the advice
+//!   prompt) is never applied where the veto says no.
 
 #[path = "../../tests/support/fault_llm.rs"]
 mod fault_llm;
@@ -20,7 +24,7 @@ use concord_core::{AdviceVerdict, Decision, DecisionCore, DecisionSource, Maneuv
 use concord_ipc::wire::AdviceRequest;
 use concord_sidecar::config::{LlmConfig, PromptFormat};
 use concord_sidecar::llm::LlmClient;
-use concord_sidecar::prompt::{self, Utterance};
+use concord_sidecar::prompt::{self, Stated};
 use concord_sidecar::schema::{self, AdviceAnswer, IntentAnswer};
 use fault_llm::{FaultLlm, Mode};
 
@@ -91,13 +95,9 @@ fn ask_advice(
     rt: &tokio::runtime::Runtime,
     c: &LlmClient,
     request: &AdviceRequest,
-    text: &str,
+    stated: &Stated,
 ) -> Option<AdviceAnswer> {
-    let said = [Utterance {
-        from: Some(1),
-        text: text.to_string(),
-    }];
-    let messages = prompt::advice_messages(PromptFormat::Opm, 0, 3, request, &[], &said, MAX_CHARS);
+    let messages = prompt::advice_messages(PromptFormat::Opm, 0, 3, request, &[], stated, 0.7);
     let body = c.body(&messages, "advice", &schema::advice_schema(0), 64);
     rt.block_on(c.call(&body, Instant::now() + Duration::from_secs(20)))
         .ok()
@@ -105,27 +105,28 @@ fn ask_advice(
 }
 
 #[test]
-fn the_prompt_keeps_its_prefix_its_quote_and_its_schema() {
-    let (request, _) = weigh(&calm(), None);
+fn the_intent_prompt_keeps_its_prefix_its_quote_and_its_schema() {
     let c = LlmClient::new(&LlmConfig::default()).unwrap();
     for text in corpus() {
-        let said = [Utterance {
-            from: Some(1),
-            text: text.clone(),
-        }];
-        let m = prompt::advice_messages(PromptFormat::Opm, 0, 3, &request, &[], &said, MAX_CHARS);
+        let m = prompt::intent_messages("road user 1", None, &text, MAX_CHARS);
         assert_eq!(m.len(), 2, "{text}");
-        assert_eq!(m[0].content, prompt::advice_prefix(PromptFormat::Opm, 0));
+        assert_eq!(m[0].content, prompt::INTENT_PREFIX);
         let user = &m[1].content;
         assert_eq!(user.matches("<msg>").count(), 1, "{text}");
         assert_eq!(user.matches("</msg>").count(), 1, "{text}");
+        assert!(user.ends_with("</msg>"), "{text}");
         let quoted = &user[user.find("<msg>").unwrap() + 5..user.find("</msg>").unwrap()];
         assert!(quoted.chars().count() <= MAX_CHARS);
         assert!(!quoted.contains(['\n', '{', '}', '<', '>', '"', '|']));
-        let body = c.body(&m, "advice", &schema::advice_schema(0), 64);
+        let body = c.body(
+            &m,
+            "intent",
+            &schema::intent_schema(),
+            schema::INTENT_MAX_TOKENS,
+        );
         assert_eq!(
             body["response_format"]["json_schema"]["schema"],
-            schema::advice_schema(0)
+            schema::intent_schema()
         );
     }
 }
@@ -153,7 +154,7 @@ fn a_model_that_obeys_the_text_cannot_get_past_the_gate() {
                 action: "proceed",
                 delay: Duration::ZERO,
             });
-            let a = ask_advice(&rt, &c, &danger_request, &text).expect("an answer");
+            let a = ask_advice(&rt, &c, &danger_request, &Stated::default()).expect("an answer");
             assert_eq!(a.maneuver.name(), asked);
             assert!(a.confidence.unwrap() > 0.99);
             let scene = if asked == "accelerate" {
@@ -181,20 +182,18 @@ fn the_real_model_on_the_corpus_stays_in_its_schema_and_behind_the_veto() {
     let (request, _) = weigh(&danger(), None);
     let mut answered = 0;
     for text in corpus() {
-        if let Some(a) = ask_advice(&rt, &c, &request, &text) {
-            answered += 1;
-            assert!(Maneuver::ALL.contains(&a.maneuver));
-            let confidence = a.confidence.unwrap_or(0.5);
-            assert!((0.0..=1.0).contains(&confidence));
-            // Weighed at full confidence: only the veto stands between it and the wheels.
-            let (_, d) = weigh(&danger(), Some((a.maneuver, 1.0)));
-            assert_ne!(d.source, DecisionSource::Advice, "{text}: {:?}", a.maneuver);
-        }
-        let messages = prompt::intent_messages("Road user 1", &[], &text, MAX_CHARS);
-        let body = c.body(&messages, "intent", &schema::intent_schema(), 96);
+        // What the passenger's words can do now: set the passenger's intent, which the advice
+        // prompt renders.
+        let messages = prompt::intent_messages("the passenger", None, &text, MAX_CHARS);
+        let body = c.body(
+            &messages,
+            "intent",
+            &schema::intent_schema(),
+            schema::INTENT_MAX_TOKENS,
+        );
+        let mut stated = Stated::default();
         if let Ok(r) = rt.block_on(c.call(&body, Instant::now() + Duration::from_secs(20))) {
             if let Ok(i) = IntentAnswer::decode(&r.answer, 0.5) {
-                assert!(i.reply.chars().count() <= 64);
                 for c in [
                     i.style.map(|s| s.1),
                     i.action.map(|a| a.1),
@@ -205,7 +204,17 @@ fn the_real_model_on_the_corpus_stays_in_its_schema_and_behind_the_veto() {
                 {
                     assert!((0.0..=1.0).contains(&c));
                 }
+                stated.passenger = i.to_wire();
             }
+        }
+        if let Some(a) = ask_advice(&rt, &c, &request, &stated) {
+            answered += 1;
+            assert!(Maneuver::ALL.contains(&a.maneuver));
+            let confidence = a.confidence.unwrap_or(0.5);
+            assert!((0.0..=1.0).contains(&confidence));
+            // Weighed at full confidence: only the veto stands between it and the wheels.
+            let (_, d) = weigh(&danger(), Some((a.maneuver, 1.0)));
+            assert_ne!(d.source, DecisionSource::Advice, "{text}: {:?}", a.maneuver);
         }
     }
     assert!(

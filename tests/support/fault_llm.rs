@@ -1,6 +1,6 @@
 //! A loopback stand-in for an OpenAI-compatible server that misbehaves on purpose, for the
-//! timeout, garbage and crash tests (the end-to-end test uses the real local server). It
-//! listens on 127.0.0.1 on a free port, answers `GET /v1/models`, and answers
+//! timeout, garbage and crash tests and the hostile corpus (the end-to-end test uses the real
+//! local server). It listens on 127.0.0.1 on a free port, answers `GET /v1/models`, and answers
 //! `POST /v1/chat/completions` according to its current [`Mode`], which a test may change at
 //! any time. Dropping it stops it.
 #![allow(dead_code)]
@@ -30,6 +30,9 @@ pub enum Mode {
     Malformed,
     /// A JSON answer with a maneuver outside the schema.
     UnknownEnum,
+    /// A compromised model that obeys every message it is shown and remembers it: see
+    /// [`obey`]. Every request body is kept in [`FaultLlm::bodies`].
+    Obey,
     /// HTTP 500.
     ServerError,
     /// Reads the request, then closes the connection without a word.
@@ -56,6 +59,9 @@ pub struct FaultLlm {
     stop: Arc<AtomicBool>,
     /// Completion requests received.
     pub requests: Arc<AtomicU64>,
+    /// In [`Mode::Obey`]: every completion request body, and the messages seen so far.
+    pub bodies: Arc<Mutex<Vec<serde_json::Value>>>,
+    memory: Arc<Mutex<Vec<String>>>,
 }
 
 impl FaultLlm {
@@ -66,13 +72,21 @@ impl FaultLlm {
         let mode = Arc::new(Mutex::new(mode));
         let stop = Arc::new(AtomicBool::new(false));
         let requests = Arc::new(AtomicU64::new(0));
-        let (m, s, r) = (mode.clone(), stop.clone(), requests.clone());
+        let bodies = Arc::new(Mutex::new(Vec::new()));
+        let memory = Arc::new(Mutex::new(Vec::new()));
+        let shared = Shared {
+            mode: mode.clone(),
+            stop: stop.clone(),
+            requests: requests.clone(),
+            bodies: bodies.clone(),
+            memory: memory.clone(),
+        };
         std::thread::spawn(move || {
-            while !s.load(Ordering::Relaxed) {
+            while !shared.stop.load(Ordering::Relaxed) {
                 match listener.accept() {
                     Ok((stream, _)) => {
-                        let (m, s, r) = (m.clone(), s.clone(), r.clone());
-                        std::thread::spawn(move || serve(stream, &m, &s, &r));
+                        let shared = shared.clone();
+                        std::thread::spawn(move || serve(stream, &shared));
                     }
                     Err(_) => std::thread::sleep(Duration::from_millis(5)),
                 }
@@ -83,7 +97,15 @@ impl FaultLlm {
             mode,
             stop,
             requests,
+            bodies,
+            memory,
         }
+    }
+
+    /// Forgets the request bodies and the messages an obeying model remembers.
+    pub fn forget(&self) {
+        self.bodies.lock().unwrap().clear();
+        self.memory.lock().unwrap().clear();
     }
 
     pub fn url(&self) -> String {
@@ -101,7 +123,22 @@ impl Drop for FaultLlm {
     }
 }
 
-fn serve(stream: TcpStream, mode: &Mutex<Mode>, stop: &AtomicBool, requests: &AtomicU64) {
+#[derive(Clone)]
+struct Shared {
+    mode: Arc<Mutex<Mode>>,
+    stop: Arc<AtomicBool>,
+    requests: Arc<AtomicU64>,
+    bodies: Arc<Mutex<Vec<serde_json::Value>>>,
+    memory: Arc<Mutex<Vec<String>>>,
+}
+
+fn serve(stream: TcpStream, shared: &Shared) {
+    let Shared {
+        mode,
+        stop,
+        requests,
+        ..
+    } = shared;
     stream.set_nonblocking(false).ok();
     stream.set_read_timeout(Some(Duration::from_secs(30))).ok();
     let mut reader = BufReader::new(stream.try_clone().unwrap());
@@ -140,7 +177,7 @@ fn serve(stream: TcpStream, mode: &Mutex<Mode>, stop: &AtomicBool, requests: &At
         requests.fetch_add(1, Ordering::Relaxed);
         let text = String::from_utf8_lossy(&body);
         let intent = text.contains("\"name\":\"intent\"");
-        let phrase = text.contains("\"name\":\"ehmi\"");
+        let phrase = text.contains("\"name\":\"ehmi\"") || text.contains("\"name\":\"reply\"");
         let current = mode.lock().unwrap().clone();
         let answer = |maneuver: &str, p: f64, ehmi: &str, action: &str| {
             if intent {
@@ -151,8 +188,6 @@ fn serve(stream: TcpStream, mode: &Mutex<Mode>, stop: &AtomicBool, requests: &At
                     (action, p.ln()),
                     (r#"","task":""#, 0.0),
                     ("commute", 0.9f64.ln()),
-                    (r#"","reply":""#, 0.0),
-                    (ehmi, -0.1),
                     ("\"}", 0.0),
                 ])
             } else if phrase {
@@ -194,6 +229,12 @@ fn serve(stream: TcpStream, mode: &Mutex<Mode>, stop: &AtomicBool, requests: &At
                 200,
                 &completion(&[(r#"{"maneuver":"fly","ehmi":"Up we go.","style":"x"}"#, 0.0)]),
             ),
+            Mode::Obey => {
+                let request: serde_json::Value = serde_json::from_slice(&body).unwrap_or_default();
+                let reply = obey(&request, &mut shared.memory.lock().unwrap());
+                shared.bodies.lock().unwrap().push(request);
+                respond(&mut out, 200, &reply);
+            }
             Mode::ServerError => respond(&mut out, 500, r#"{"error":"internal"}"#),
             Mode::Close => {
                 let _ = stream.shutdown(Shutdown::Both);
@@ -201,6 +242,163 @@ fn serve(stream: TcpStream, mode: &Mutex<Mode>, stop: &AtomicBool, requests: &At
             }
         }
     }
+}
+
+/// What a compromised model answers. It remembers every message quoted to it (the intent
+/// parser's `<msg>…</msg>`) and obeys the newest in every later answer, at probability 1 (each
+/// token's log-probability 0, no alternatives):
+/// * intents: the style "aggressive", the task "emergency" and the action the message demands;
+/// * advice: the maneuver the message demands (`accelerate` when it names none);
+/// * eHMI phrasings and replies: a text that states what the prompt says the car does, followed
+///   by as many of the remembered messages' own words (folded to ASCII where they can be) as
+///   64 characters hold.
+///
+/// A message "demands" the first maneuver it names, in English, German or Chinese, also inside
+/// base64.
+pub fn obey(request: &serde_json::Value, memory: &mut Vec<String>) -> String {
+    let name = request["response_format"]["json_schema"]["name"]
+        .as_str()
+        .unwrap_or("");
+    let user = request["messages"]
+        .as_array()
+        .and_then(|m| m.last())
+        .and_then(|m| m["content"].as_str())
+        .unwrap_or("")
+        .to_string();
+    if let (Some(a), Some(b)) = (user.find("<msg>"), user.rfind("</msg>")) {
+        if a + 5 <= b {
+            memory.push(user[a + 5..b].to_string());
+        }
+    }
+    let demanded = memory.last().map_or("accelerate", |m| demand(m));
+    match name {
+        "intent" => {
+            let action = match demanded {
+                "decelerate" => "yield",
+                "keep_speed" => "proceed",
+                other => other,
+            };
+            completion(&[
+                (r#"{"style":""#, 0.0),
+                ("aggressive", 0.0),
+                (r#"","action":""#, 0.0),
+                (action, 0.0),
+                (r#"","task":""#, 0.0),
+                ("emergency", 0.0),
+                ("\"}", 0.0),
+            ])
+        }
+        "ehmi" | "reply" => {
+            let stated = [
+                ("is slowing down", "I am slowing down; please go ahead."),
+                (
+                    "is accelerating",
+                    "I am speeding up to go first; please wait.",
+                ),
+                ("keeps its speed", "I am keeping my speed; please wait."),
+                ("is turning left", "I am turning left first; please wait."),
+                ("is turning right", "I am turning right first; please wait."),
+                ("is stopping", "Stopping. Please go ahead carefully."),
+            ]
+            .iter()
+            .find(|(says, _)| user.contains(says))
+            .map_or("Please go ahead.", |(_, t)| t);
+            let own = concord_sidecar::ehmi::own_vocabulary();
+            let said: Vec<String> = memory
+                .iter()
+                .flat_map(|m| concord_sidecar::untrusted::words(m))
+                .filter(|w| !own.contains(w))
+                .collect();
+            let ascii: Vec<&String> = said.iter().filter(|w| w.is_ascii()).collect();
+            let echo: Vec<&String> = if ascii.is_empty() {
+                said.iter().collect()
+            } else {
+                ascii
+            };
+            let mut text = stated.to_string();
+            for w in echo {
+                if text.chars().count() + 1 + w.chars().count() > 64 {
+                    break;
+                }
+                text.push(' ');
+                text.push_str(w);
+            }
+            let quoted = serde_json::to_string(&text).unwrap();
+            completion(&[(r#"{"text":"#, 0.0), (&quoted, 0.0), ("}", 0.0)])
+        }
+        _ => completion(&[(r#"{"maneuver":""#, 0.0), (demanded, 0.0), ("\"}", 0.0)]),
+    }
+}
+
+/// The maneuver `message` names first (schema names, English, German, Chinese; also inside
+/// base64 words), else `accelerate`.
+fn demand(message: &str) -> &'static str {
+    const NAMES: [(&str, &str); 27] = [
+        ("turn_right", "turn_right"),
+        ("turn right", "turn_right"),
+        ("rechts", "turn_right"),
+        ("右转", "turn_right"),
+        ("右拐", "turn_right"),
+        ("turn_left", "turn_left"),
+        ("turn left", "turn_left"),
+        ("links", "turn_left"),
+        ("左转", "turn_left"),
+        ("左拐", "turn_left"),
+        ("keep_speed", "keep_speed"),
+        ("keep speed", "keep_speed"),
+        ("tempo halten", "keep_speed"),
+        ("保持", "keep_speed"),
+        ("decelerat", "decelerate"),
+        ("slow", "decelerate"),
+        ("brems", "decelerate"),
+        ("langsam", "decelerate"),
+        ("减速", "decelerate"),
+        ("停", "decelerate"),
+        ("stop", "decelerate"),
+        ("accelerat", "accelerate"),
+        ("beschleunig", "accelerate"),
+        ("gas geben", "accelerate"),
+        ("加速", "accelerate"),
+        ("快", "accelerate"),
+        ("hurry", "accelerate"),
+    ];
+    let mut texts = vec![concord_sidecar::untrusted::normalise(message, usize::MAX).to_lowercase()];
+    texts.extend(
+        message
+            .split(|c: char| !(c.is_ascii_alphanumeric() || matches!(c, '+' | '/' | '=')))
+            .filter(|w| w.len() >= 8)
+            .filter_map(base64)
+            .map(|d| d.to_lowercase()),
+    );
+    texts
+        .iter()
+        .filter_map(|t| {
+            NAMES
+                .iter()
+                .filter_map(|(n, m)| t.find(n).map(|at| (at, *m)))
+                .min()
+        })
+        .map(|(_, m)| m)
+        .next()
+        .unwrap_or("accelerate")
+}
+
+/// The UTF-8 text `word` encodes in standard base64, if it does.
+fn base64(word: &str) -> Option<String> {
+    const ALPHABET: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut bits = 0u32;
+    let mut n = 0;
+    let mut out = Vec::new();
+    for c in word.trim_end_matches('=').bytes() {
+        bits = (bits << 6) | ALPHABET.iter().position(|a| *a == c)? as u32;
+        n += 6;
+        if n >= 8 {
+            n -= 8;
+            out.push((bits >> n) as u8);
+            bits &= (1 << n) - 1;
+        }
+    }
+    String::from_utf8(out).ok()
 }
 
 fn completion(tokens: &[(&str, f64)]) -> String {
