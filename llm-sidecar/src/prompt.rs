@@ -13,7 +13,7 @@ use std::fmt::Write;
 
 use concord_core::scene::{AgentKind, IntentAction, Style, Task, Turn, TurnSignal};
 use concord_core::Maneuver;
-use concord_ipc::wire::{AdviceRequest, SceneFrame, WireAgent, WireIntent, UNKNOWN};
+use concord_ipc::wire::{AdviceRequest, SceneFrame, WireAgent, WireConflict, WireIntent, UNKNOWN};
 use serde::Serialize;
 
 use crate::config::PromptFormat;
@@ -250,12 +250,13 @@ fn opm_scene(r: &AdviceRequest, max_objects: usize, out: &mut String) {
             let c = &r.conflicts[o.conflict as usize];
             let _ = write!(
                 out,
-                " Conflict: V{} in {:.1} s, ego in {:.1} s, dTTC {:.1} s{}.",
+                " Conflict: V{} in {:.1} s, ego in {:.1} s, dTTC {:.1} s{}; {}.",
                 a.id,
                 c.agent_ttc_s,
                 c.ego_ttc_s,
                 c.delta_ttc_s,
-                if c.risky != 0 { ", risky" } else { "" }
+                if c.risky != 0 { ", risky" } else { "" },
+                implicit(c)
             );
         } else if o.longitudinal_m < 1e6 {
             let _ = write!(out, " Same path, {:.0} m away.", o.longitudinal_m);
@@ -275,6 +276,29 @@ fn opm_scene(r: &AdviceRequest, max_objects: usize, out: &mut String) {
     if n == 0 {
         out.push_str("No other road user is relevant.\n");
     }
+}
+
+/// Who has the right of way at a conflict (`RightOfWay` code, A = the ego).
+fn right_of_way(code: u8) -> &'static str {
+    match code {
+        1 => "ego",
+        2 => "other",
+        _ => "neither",
+    }
+}
+
+/// The other's implicit intent at conflict `c` (§4.1), as its motion shows it.
+fn implicit(c: &WireConflict) -> String {
+    let reading = if c.committed != 0 {
+        "committed (cannot stop)".to_string()
+    } else {
+        format!(
+            "by its motion yielding {:.0}%, proceeding {:.0}%",
+            c.yielding * 100.0,
+            c.proceeding * 100.0
+        )
+    };
+    format!("{reading}, right of way: {}", right_of_way(c.right_of_way))
 }
 
 /// The scene of `r` as flat fields.
@@ -304,7 +328,16 @@ fn simple_scene(r: &AdviceRequest, out: &mut String) {
         );
         if o.conflict != UNKNOWN && o.conflict < r.n_conflicts {
             let c = &r.conflicts[o.conflict as usize];
-            let _ = write!(out, " ttc={:.1} ego_ttc={:.1}", c.agent_ttc_s, c.ego_ttc_s);
+            let _ = write!(
+                out,
+                " ttc={:.1} ego_ttc={:.1} yielding={:.2} proceeding={:.2} committed={} right_of_way={}",
+                c.agent_ttc_s,
+                c.ego_ttc_s,
+                c.yielding,
+                c.proceeding,
+                c.committed,
+                right_of_way(c.right_of_way)
+            );
         }
         if let Some(i) = describe_intent(&a.intent) {
             let _ = write!(out, " intent={i}");

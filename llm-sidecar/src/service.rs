@@ -50,6 +50,9 @@ use crate::schema::{self, AdviceAnswer, IntentAnswer};
 
 /// The bus publishes up to one period after the answer: leave that much before the deadline.
 const PUBLISH_MARGIN: Duration = Duration::from_millis(20);
+/// A road user whose implicit yield and proceed probabilities both stay below this leaves its
+/// intent open (a proactive inquiry may settle it).
+const OPEN_INTENT_BELOW: f32 = 0.6;
 
 /// Counters, printed periodically and on exit.
 #[derive(Debug, Default, Clone)]
@@ -722,7 +725,8 @@ impl Sidecar {
         self.publish(Outbound::Ehmi(m));
     }
 
-    /// Asks road users in a risky conflict whose intent is unknown whether they go first.
+    /// Asks road users in a risky conflict whose intent is unknown, in words and in motion,
+    /// whether they go first.
     fn inquire(&self, now: Instant) {
         let interval = Duration::from_secs_f64(self.cfg.ehmi.inquiry_interval_s);
         let mut out = Vec::new();
@@ -825,7 +829,9 @@ impl Sidecar {
             })
     }
 
-    /// Road users in a risky conflict whose action is unknown (or weak).
+    /// Road users in a risky conflict whose intent neither their words (a strong parsed
+    /// action) nor their motion (an implicit yield or proceed of at least
+    /// [`OPEN_INTENT_BELOW`], or being committed) makes known.
     fn unknown_parties(&self, s: &State) -> Vec<u32> {
         let Some(r) = s.request.as_ref() else {
             return Vec::new();
@@ -834,9 +840,13 @@ impl Sidecar {
             IntentAction::try_from(i.action).is_ok()
                 && i.action_confidence as f64 >= self.cfg.intent.weak_below
         };
+        // Risky, and its motion leaves it open (neither its implicit yield nor its proceeding
+        // is likely, and it is not committed): a question can settle it.
         r.conflicts[..(r.n_conflicts as usize).min(WIRE_OBJECTS)]
             .iter()
-            .filter(|c| c.risky != 0)
+            .filter(|c| {
+                c.risky != 0 && c.committed == 0 && c.yielding.max(c.proceeding) < OPEN_INTENT_BELOW
+            })
             .map(|c| c.agent_id)
             .filter(|id| {
                 let from_frame = r.objects[..(r.n_objects as usize).min(WIRE_OBJECTS)]
