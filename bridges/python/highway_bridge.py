@@ -3,6 +3,18 @@
     python highway_bridge.py --env intersection-v0 --seeds 50                  # Concord
     python highway_bridge.py --env intersection-v0 --seeds 50 --policy idle   # a baseline
     python highway_bridge.py --env merge-v0 --seeds 50                         # Concord
+    python highway_bridge.py --env intersection-v2 --seeds 50 --duration 20   # longer episodes
+    python highway_bridge.py --env intersection-v0 --oracle-ceiling --oracle-first \
+        --seed-list 0-99,500-599 --json ceiling.json                          # the oracle
+    python highway_bridge.py --env intersection-v0 --seed-list 0-99,500-599 --ceiling ceiling.json
+
+Environments (``--env``): ``intersection-v0`` and ``merge-v0``, and ``intersection-v2`` and
+``merge-v1``: highway-env's ``ConnectedLaneIntersectionEnv`` and ``ConnectedLaneMergeEnv``, the
+same roads, traffic, configuration and arrival rules as their v0 with highway-env 1.12's
+``neighbour_vehicles_connected_lanes`` (a vehicle looking for its leader also searches the
+lanes connected to its own, so it sees a car just past a lane boundary). The core runs the same
+geometry and configuration file for both variants; merge-v1 is built with merge-v0's reward fix
+(``make_merge_env``).
 
 For ``--policy concord`` the bridge starts ``concord run --geometry highway-env-intersection``
 (``highway-env-merge`` for merge-v0, each with its ``deploy/`` configuration) under a private
@@ -67,9 +79,61 @@ initial traffic of a seed is the same at every frequency. Baselines run with the
 ``--trace FILE`` logs one JSON line per decision: the frame, the maneuver, P_n, the commanded
 action and the OPM conflicts of the advice request (for replaying a scene through the core).
 
+Duration. ``--duration S`` sets the episode length: intersection's own ``duration``
+configuration (13 s by default), which truncates the episode at the first step whose clock
+reaches it; highway-env's clock is a float sum of the 0.2 s steps, which passes 13 only after
+66 steps, so a 13 s episode that neither arrives nor crashes lasts 13.2 s (20 s: 20.2 s, 6 s:
+6.0 s). For the merges it is the bridge's own time limit (40 s by default), counted exactly.
+
+Per episode (``--json``: ``episodes``), besides collision, arrival and speed:
+
+* ``outcome``: how it ended, one of ``arrived`` (the arrival rule, without a collision),
+  ``crash``, ``decision_timeout`` (Concord did not answer within ``--timeout``) and
+  ``time_limit`` (the duration ran out); the summary counts each kind (they add up to the
+  number of episodes).
+* ``standing_s``: the time the ego stands, i.e. the number of environment steps that end with
+  the ego slower than ``STANDING_SPEED_MPS`` = 0.3 m/s, times the period (a stopping ego
+  rarely reaches exactly 0: DiscreteMetaAction's speed controller approaches its set-point
+  exponentially, and ContinuousAction's speed floor lets the speed dip a few cm/s below 0);
+  summary: mean, median and max over the episodes.
+* ``others_max_decel_mps2`` (and ``others_max_decel_t_s``): the hardest braking of any other
+  vehicle while it is within ``NEAR_EGO_M`` = 30 m of the ego (centre to centre, at the start
+  or the end of the step): each vehicle is identified by Python object identity in
+  ``env.unwrapped.road.vehicles``, its deceleration is the finite difference of its speed
+  between two environment steps, and crashed vehicles are left out (see ``OthersMonitor``).
+  For scale: intersection-v0 gives its traffic COMFORT_ACC_MIN = -3 m/s², but highway-env's IDM
+  brakes at up to its ACC_MAX, 6 m/s², when a gap closes, and every car that
+  ``RegulatedRoad`` tells to yield (target speed 0) brakes at that 6 m/s² at first, so braking
+  above 3 m/s² near the ego is common even when the ego stands. Summary: the max over
+  episodes, the mean of the per-episode maxima, and the number of episodes in which a vehicle
+  near the ego braked harder than ``HARD_BRAKING_MPS2`` = 3 m/s².
+* ``min_distance_m``: the smallest centre-to-centre distance between the ego and any other
+  vehicle at the reset and the end of each step (cars on the adjacent opposite lane pass 4 m
+  apart; two 5 m x 2 m cars touch at 2 m side by side).
+
+Oracle ceiling (``--oracle-ceiling``, intersection only; highway_oracle.py documents it): for
+each seed the environment is reset exactly as a ``--policy concord`` run resets it
+(``make_env``: same configuration, policy frequency, spawn scaling, ContinuousAction ranges and
+duration), and a family of ego speed profiles (wait at a standstill, at the stop line or
+crawling until w, then accelerate at a to a cruise speed; constant speeds) is driven on deep
+copies of it, steering along the ego's route; a seed is *reachable* when any profile arrives
+before the duration ends without a crash. ``--oracle-first`` stops at a seed's first arriving
+profile (reachability only), ``--oracle-budget N`` bounds the simulated steps per seed (a seed
+whose budget runs out without an arrival is reported as undecided), ``--oracle-reuse FILE``
+takes the reachable seeds of an oracle run at a shorter duration as reachable (the same profile
+arrives at the same step) and searches the others only, ``--family`` picks the profile family,
+``--seed-list 0-99,500-599`` any seeds. The oracle prints a line per seed with its time and an
+estimate of the rest, then the reachable seeds and how many seeds each kind of profile reaches;
+``--json FILE`` writes it all. ``--ceiling FILE`` (that JSON) makes a normal run also report its
+success as a share of the reachable seeds, and list the reachable seeds it failed and the
+unreachable seeds it failed or passed (seeds the oracle left undecided are left out and listed);
+the file must have been measured with the same environment, duration and policy frequency.
+
 Results: per policy, collision rate, success rate (arrived without collision), mean ego speed
-(over all steps of all episodes) and the number of minimum-risk decisions; the last line is a
-one-line summary, and ``--json FILE`` writes every number and each episode's outcome.
+(over all steps of all episodes) and the number of minimum-risk decisions, then the outcome
+counts, standing time, others' braking, closest distance and (with ``--ceiling``) the ceiling
+lines; the last line is a one-line summary, and ``--json FILE`` writes every number and each
+episode's outcome.
 """
 
 import argparse
@@ -112,21 +176,30 @@ def merge_progress(x, y):
     return x
 
 
-def make_merge_env(config):
-    """merge-v0 (``highway_env.envs.merge_env:MergeEnv``, as ``gym.make("merge-v0")`` builds it)
-    with one fix: its ``_rewards`` tests ``action in [0, 2]`` for the lane-change penalty, which
-    raises for a ``ContinuousAction`` array (already in ``reset``). A continuous action changes
-    no lane, so it is passed on as no action. Dynamics, traffic and termination are
-    highway-env's; the bridge does not use the reward."""
-    from highway_env.envs.merge_env import MergeEnv
+def make_merge_env(config, connected_lanes=False):
+    """merge-v0 (``highway_env.envs.merge_env:MergeEnv``, as ``gym.make("merge-v0")`` builds it;
+    with ``connected_lanes``, merge-v1's ``ConnectedLaneMergeEnv``) with one fix: its
+    ``_rewards`` tests ``action in [0, 2]`` for the lane-change penalty, which raises for a
+    ``ContinuousAction`` array (already in ``reset``). A continuous action changes no lane, so
+    it is passed on as no action. Dynamics, traffic and termination are highway-env's; the
+    bridge does not use the reward."""
+    from highway_env.envs.merge_env import ConnectedLaneMergeEnv, MergeEnv
 
-    class ContinuousSafeMergeEnv(MergeEnv):
+    base = ConnectedLaneMergeEnv if connected_lanes else MergeEnv
+
+    class ContinuousSafeMergeEnv(base):
         def _rewards(self, action):
             return super()._rewards(action if np.ndim(action) == 0 else None)
 
     import gymnasium as gym
 
     return gym.wrappers.OrderEnforcing(ContinuousSafeMergeEnv(config=config))
+
+
+def make_merge_v1_env(config):
+    """merge-v1 (``ConnectedLaneMergeEnv``: merge-v0 with highway-env 1.12's
+    ``neighbour_vehicles_connected_lanes``), with ``make_merge_env``'s reward fix."""
+    return make_merge_env(config, connected_lanes=True)
 
 
 def intersection_arrived(env):
@@ -139,37 +212,72 @@ def merge_arrived(env):
 
 # Per environment: the core's geometry and configuration file (under deploy/), the ego's route
 # lane, route progress and arrival, the top of ContinuousAction's speed range, the bridge's own
-# time limit (None: the environment's), how to build the environment (None: gym.make) and
-# whether spawns are scaled to the policy frequency (see "Policy frequency" above).
-ENVS = {
-    "intersection-v0": {
-        "geometry": "highway-env-intersection",
-        "config": "highway-env.toml",
-        "route_lane": HWI_EGO_LEFT,
-        "progress": intersection_progress,
-        "arrived": intersection_arrived,
-        "max_speed": 20.0,
-        "time_limit_s": None,
-        "make": None,
-        "scale_spawn": True,
-    },
-    "merge-v0": {
-        "geometry": "highway-env-merge",
-        "config": "highway-env-merge.toml",
-        "route_lane": HWM_EGO_RIGHT,
-        "progress": merge_progress,
-        "arrived": merge_arrived,
-        "max_speed": 40.0,  # Vehicle.MAX_SPEED; the ego spawns at 30 m/s
-        "time_limit_s": 40.0,
-        "make": make_merge_env,
-        "scale_spawn": False,
-    },
+# time limit (None: the environment's), the default episode duration that ``--duration``
+# overrides and whether it is the environment's ``duration`` configuration (intersection) or
+# the bridge's time limit (merge), how to build the environment (None: gym.make) and whether
+# spawns are scaled to the policy frequency (see "Policy frequency" above). The v1/v2 variants
+# are the same road, traffic and rules with highway-env 1.12's
+# ``neighbour_vehicles_connected_lanes`` (a car also sees the vehicles on the lanes connected
+# to its own when looking for its leader, so it no longer runs into a car just past a lane
+# boundary); the core's geometry and configuration are the same.
+_INTERSECTION = {
+    "geometry": "highway-env-intersection",
+    "config": "highway-env.toml",
+    "route_lane": HWI_EGO_LEFT,
+    "progress": intersection_progress,
+    "arrived": intersection_arrived,
+    "max_speed": 20.0,
+    "time_limit_s": None,
+    "duration_s": 13.0,  # IntersectionEnv's "duration"
+    "duration_in_config": True,
+    "make": None,
+    "scale_spawn": True,
 }
+_MERGE = {
+    "geometry": "highway-env-merge",
+    "config": "highway-env-merge.toml",
+    "route_lane": HWM_EGO_RIGHT,
+    "progress": merge_progress,
+    "arrived": merge_arrived,
+    "max_speed": 40.0,  # Vehicle.MAX_SPEED; the ego spawns at 30 m/s
+    "time_limit_s": 40.0,
+    "duration_s": 40.0,  # the bridge's time limit (merge-v0 has none)
+    "duration_in_config": False,
+    "make": make_merge_env,
+    "scale_spawn": False,
+}
+ENVS = {
+    "intersection-v0": dict(_INTERSECTION),
+    "intersection-v2": dict(_INTERSECTION),  # ConnectedLaneIntersectionEnv
+    "merge-v0": dict(_MERGE),
+    "merge-v1": dict(_MERGE, make=make_merge_v1_env),  # ConnectedLaneMergeEnv
+}
+
+
+def with_duration(spec, duration):
+    """``spec`` with the episode duration ``duration`` s (None: the default)."""
+    spec = dict(spec)
+    if duration is not None:
+        spec["duration_s"] = float(duration)
+        if not spec["duration_in_config"]:
+            spec["time_limit_s"] = float(duration)
+    return spec
+
 
 # Constant DiscreteMetaAction baselines, by action name (intersection-v0 has the longitudinal
 # actions only, merge-v0 the lane changes too, so the indices differ).
 DISCRETE = {"slower": "SLOWER", "idle": "IDLE", "faster": "FASTER"}
 POLICIES = ("concord",) + tuple(DISCRETE)
+
+def make_env(env_name, policy, policy_frequency, spec):
+    """The environment exactly as a run of ``policy`` uses it (also the oracle's, see
+    highway_oracle.py): ``env_config`` and the environment's builder."""
+    import gymnasium as gym
+    import highway_env  # noqa: F401  (registers the environments)
+
+    cfg = env_config(policy, policy_frequency, spec)
+    return spec["make"](cfg) if spec["make"] else gym.make(env_name, config=cfg)
+
 
 # highway-env's kinematic model (vehicle/kinematics.py): length 5 m, slip angle
 # beta = atan(tan(delta) / 2), heading rate = v sin(beta) / (length / 2).
@@ -202,6 +310,8 @@ def env_config(policy, policy_frequency, spec=None):
     }
     if spec["scale_spawn"]:
         cfg["spawn_probability"] = 0.6 / policy_frequency
+    if spec.get("duration_in_config"):
+        cfg["duration"] = spec["duration_s"]
     if policy == "concord":
         cfg["action"] = {
             "type": "ContinuousAction",
@@ -542,6 +652,68 @@ class ConcordPolicy:
             self.core.close()
 
 
+# An ego slower than this is standing, m/s (highway-env's vehicles rarely stop exactly: see
+# "Per episode" in the module's documentation).
+STANDING_SPEED_MPS = 0.3
+# Other vehicles' braking is measured while they are this close to the ego (centre to centre), m.
+NEAR_EGO_M = 30.0
+# A deceleration harder than this is "hard braking", m/s²: the COMFORT_ACC_MIN that
+# intersection-v0 gives its traffic (IDM may brake at up to its ACC_MAX, 6 m/s², when a gap
+# closes or a car is told to yield by RegulatedRoad).
+HARD_BRAKING_MPS2 = 3.0
+OUTCOMES = ("arrived", "time_limit", "crash", "decision_timeout")
+
+
+class OthersMonitor:
+    """Per environment step, the other vehicles' braking near the ego and their distance to it.
+
+    Vehicles are identified by Python object identity in ``road.vehicles`` (a vehicle that
+    leaves and a new one never share an entry: the object is kept with its speed). A vehicle's
+    deceleration over a step is the finite difference of its speed between the two
+    environment steps, -(v1 - v0) / period (highway-env's IDM acceleration is constant over
+    each 1/15 s frame, so this is its mean over the step's frames); it counts when the vehicle
+    is within ``NEAR_EGO_M`` of the ego at the start or the end of the step and has not
+    crashed (a crashed car's speed decays by highway-env's crash model, not by braking)."""
+
+    def __init__(self, u, period):
+        self.period = period
+        self.prev = {}
+        self.max_decel = 0.0
+        self.max_decel_t = None
+        self.min_distance = math.inf
+        self.observe(u, None)
+
+    def observe(self, u, t):
+        ego = u.vehicle
+        cur = {}
+        for v in u.road.vehicles:
+            if v is ego:
+                continue
+            d = float(np.linalg.norm(v.position - ego.position))
+            self.min_distance = min(self.min_distance, d)
+            cur[id(v)] = (v, float(v.speed), d)
+            old = self.prev.get(id(v))
+            if t is None or old is None or old[0] is not v or v.crashed:
+                continue
+            if min(old[2], d) <= NEAR_EGO_M:
+                decel = -(float(v.speed) - old[1]) / self.period
+                if decel > self.max_decel:
+                    self.max_decel, self.max_decel_t = decel, t
+        self.prev = cur
+
+
+def outcome_kind(e):
+    """How an episode ended: a collision, an arrival, Concord's decision timeout or the time
+    limit (the environment's duration or the bridge's own)."""
+    if e["crashed"]:
+        return "crash"
+    if e["arrived"]:
+        return "arrived"
+    if e["timed_out"]:
+        return "decision_timeout"
+    return "time_limit"
+
+
 def run_episode(env, policy, name, seed, period, spec, verbose=False):
     """One seed. Returns the episode's outcome as a dict."""
     obs, _ = env.reset(seed=seed)
@@ -551,6 +723,8 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
     speeds, min_risk, decisions, steps, timed_out = [], 0, 0, 0, False
     maneuvers = {}
     crashed = arrived = False
+    standing_steps = 0
+    monitor = OthersMonitor(u, period)
     limit = spec["time_limit_s"]
     discrete = None if name == "concord" else u.action_type.actions_indexes[DISCRETE[name]]
     while True:
@@ -570,6 +744,9 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
         obs, _, terminated, truncated, info = env.step(action)
         steps += 1
         speeds.append(float(u.vehicle.speed))
+        if float(u.vehicle.speed) < STANDING_SPEED_MPS:
+            standing_steps += 1
+        monitor.observe(u, steps * period)
         crashed = bool(u.vehicle.crashed)
         arrived = spec["arrived"](u)
         if verbose and name == "concord":
@@ -578,7 +755,7 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
                   f"{wire.SOURCES[d.source]}", file=sys.stderr)
         if terminated or truncated or (limit is not None and steps * period >= limit - 1e-9):
             break
-    return {
+    e = {
         "seed": seed,
         "steps": steps,
         "decisions": decisions,
@@ -592,12 +769,25 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
         "maneuvers": maneuvers,
         "final_position": [float(v) for v in u.vehicle.position],
         "final_progress_m": float(spec["progress"](*u.vehicle.position)),
+        # Steps that ended with the ego below STANDING_SPEED_MPS, times the period.
+        "standing_s": standing_steps * period,
+        # Largest deceleration of another vehicle near the ego (OthersMonitor), m/s², and when.
+        "others_max_decel_mps2": monitor.max_decel,
+        "others_max_decel_t_s": monitor.max_decel_t,
+        # Smallest centre-to-centre distance between the ego and another vehicle, m (None: the
+        # ego was alone).
+        "min_distance_m": None if math.isinf(monitor.min_distance) else monitor.min_distance,
     }
+    e["outcome"] = outcome_kind(e)
+    return e
 
 
 def summarize(env_name, name, episodes):
     n = len(episodes)
     steps = sum(e["steps"] for e in episodes)
+    standing = [e["standing_s"] for e in episodes]
+    decel = [e["others_max_decel_mps2"] for e in episodes]
+    dist = [e["min_distance_m"] for e in episodes if e["min_distance_m"] is not None]
     return {
         "env": env_name,
         "policy": name,
@@ -609,7 +799,84 @@ def summarize(env_name, name, episodes):
         "steps": steps,
         "decisions": sum(e["decisions"] for e in episodes),
         "minimum_risk_decisions": sum(e["minimum_risk"] for e in episodes),
+        "outcomes": {k: sum(e["outcome"] == k for e in episodes) for k in OUTCOMES},
+        "standing_s": {"mean": float(np.mean(standing)), "median": float(np.median(standing)),
+                       "max": float(np.max(standing)), "threshold_mps": STANDING_SPEED_MPS},
+        "others_braking": {
+            "max_mps2": float(np.max(decel)),
+            "mean_of_episode_max_mps2": float(np.mean(decel)),
+            "episodes_harder_than_threshold": sum(d > HARD_BRAKING_MPS2 for d in decel),
+            "threshold_mps2": HARD_BRAKING_MPS2, "near_ego_m": NEAR_EGO_M},
+        "min_distance_m": {"min": float(np.min(dist)) if dist else None,
+                           "median": float(np.median(dist)) if dist else None},
     }
+
+
+def load_ceiling(path, env_name, spec, policy_frequency):
+    """The oracle's JSON (``--oracle-ceiling --json FILE``), checked against this run's
+    environment, duration and policy frequency: {seed: reachable}."""
+    with open(path, encoding="utf-8") as f:
+        data = json.load(f)
+    o = data["oracle"]
+    mismatch = [(k, o[k], v) for k, v in (("env", env_name), ("duration_s", spec["duration_s"]),
+                                          ("policy_frequency_hz", policy_frequency))
+                if o[k] != v]
+    if mismatch:
+        raise SystemExit(f"--ceiling {path} was measured with other settings: "
+                         + ", ".join(f"{k} {a} (this run {b})" for k, a, b in mismatch))
+    # A seed whose search ran out of budget without an arrival is undecided (None).
+    return {int(r["seed"]): (None if r.get("undecided") and not r["reachable"]
+                             else bool(r["reachable"])) for r in data["seeds"]}
+
+
+def ceiling_report(episodes, reachable):
+    """Success against the oracle's ceiling, over the seeds of this run that the oracle has."""
+    known = [e for e in episodes if reachable.get(e["seed"]) is not None]
+    reach = [e for e in known if reachable[e["seed"]]]
+    unreach = [e for e in known if not reachable[e["seed"]]]
+    return {
+        "seeds_in_ceiling": len(known),
+        "missing_seeds": [e["seed"] for e in episodes if e["seed"] not in reachable],
+        "reachable": len(reach),
+        "arrived_on_reachable": sum(e["arrived"] for e in reach),
+        "success_of_reachable": (sum(e["arrived"] for e in reach) / len(reach)) if reach else None,
+        "reachable_failed": [e["seed"] for e in reach if not e["arrived"]],
+        "unreachable_failed": [e["seed"] for e in unreach if not e["arrived"]],
+        "unreachable_passed": [e["seed"] for e in unreach if e["arrived"]],
+        "undecided": [e["seed"] for e in episodes
+                      if e["seed"] in reachable and reachable[e["seed"]] is None],
+    }
+
+
+def detail_lines(s):
+    """The new summary numbers, printed before the final summary line."""
+    o, st, b, d = s["outcomes"], s["standing_s"], s["others_braking"], s["min_distance_m"]
+    lines = [
+        "outcomes: " + ", ".join(f"{k} {o[k]}" for k in OUTCOMES),
+        f"standing (ego < {st['threshold_mps']} m/s): mean {st['mean']:.2f} s, median "
+        f"{st['median']:.2f} s, max {st['max']:.2f} s per episode",
+        f"others' braking within {b['near_ego_m']:.0f} m of the ego: max {b['max_mps2']:.2f} "
+        f"m/s², mean of episode maxima {b['mean_of_episode_max_mps2']:.2f} m/s², episodes "
+        f"harder than {b['threshold_mps2']:.0f} m/s²: {b['episodes_harder_than_threshold']}",
+    ]
+    if d["min"] is not None:
+        lines.append(f"closest other vehicle (centre to centre): min {d['min']:.2f} m, median "
+                     f"of episode minima {d['median']:.2f} m")
+    c = s.get("ceiling")
+    if c is not None:
+        share = ("n/a" if c["success_of_reachable"] is None
+                 else f"{100 * c['success_of_reachable']:.1f} %")
+        lines.append(f"ceiling: {c['reachable']} of {c['seeds_in_ceiling']} seeds reachable, "
+                     f"arrived on {c['arrived_on_reachable']} of them: success {share} of "
+                     f"reachable")
+        lines.append(f"ceiling: reachable seeds failed {c['reachable_failed']}")
+        lines.append(f"ceiling: unreachable seeds failed {c['unreachable_failed']}, passed "
+                     f"{c['unreachable_passed']}")
+        if c["undecided"]:
+            lines.append(f"ceiling: seeds the oracle left undecided (left out) {c['undecided']}")
+        if c["missing_seeds"]:
+            lines.append(f"ceiling: seeds not in the ceiling file {c['missing_seeds']}")
+    return lines
 
 
 def summary_line(s):
@@ -623,15 +890,21 @@ def main(argv=None):
     ap.add_argument("--env", default="intersection-v0", choices=sorted(ENVS))
     ap.add_argument("--seeds", type=int, default=50, help="number of seeds (default 50)")
     ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--seed-list", default=None,
+                    help="comma-separated seeds and ranges (e.g. 0-99,500-599) instead of "
+                    "--first-seed/--seeds")
     ap.add_argument("--policy", default="concord", choices=POLICIES)
     ap.add_argument("--concord", default=os.path.join(ROOT, "target", "release", "concord"),
                     help="concord binary (default target/release/concord)")
     ap.add_argument("--config", default=None,
                     help="TOML for concord run --config (default deploy/highway-env.toml, "
-                    "deploy/highway-env-merge.toml for merge-v0)")
+                    "deploy/highway-env-merge.toml for the merges)")
     ap.add_argument("--rate", type=float, default=100.0, help="core loop rate, Hz")
     ap.add_argument("--policy-frequency", type=int, default=5,
                     help="environment steps per simulated second (highway-env default 1)")
+    ap.add_argument("--duration", type=float, default=None,
+                    help="episode duration, s: the intersection's duration configuration "
+                    "(default 13) or the merge's bridge-side time limit (default 40)")
     ap.add_argument("--lookahead", type=float, default=0.6,
                     help="time ahead on the trajectory that the steering aims at, s")
     ap.add_argument("--timeout", type=float, default=2.0,
@@ -647,31 +920,55 @@ def main(argv=None):
     ap.add_argument("--trace", default=None,
                     help="write one JSON line per decision (scene, OPM conflicts, P_n) here")
     ap.add_argument("--json", default=None, help="write the results to this file")
+    ap.add_argument("--ceiling", default=None,
+                    help="the oracle's JSON (--oracle-ceiling --json): also report success as "
+                    "a share of the seeds the oracle reaches")
+    ap.add_argument("--oracle-ceiling", action="store_true",
+                    help="instead of running a policy, find for each seed whether any ego "
+                    "speed profile of the oracle's family arrives (highway_oracle.py)")
+    ap.add_argument("--oracle-first", action="store_true",
+                    help="the oracle stops at a seed's first arriving profile (reachability "
+                    "only: the per-profile counts then cover the profiles tried)")
+    ap.add_argument("--oracle-budget", type=int, default=None,
+                    help="the oracle's limit of simulated steps per seed; a seed whose search "
+                    "ends on it without an arrival is undecided (default: none)")
+    ap.add_argument("--oracle-reuse", default=None,
+                    help="an oracle JSON of the same env at a shorter or equal duration: its "
+                    "reachable seeds are reachable here too and are not searched again")
+    ap.add_argument("--family", default="default",
+                    help="the oracle's profile family: default, small, or a JSON file "
+                    "(see highway_oracle.py)")
     ap.add_argument("--verbose", action="store_true")
     args = ap.parse_args(argv)
-    spec = ENVS[args.env]
+    spec = with_duration(ENVS[args.env], args.duration)
+    seeds = (parse_seeds(args.seed_list) if args.seed_list
+             else list(range(args.first_seed, args.first_seed + args.seeds)))
+    if args.oracle_ceiling:
+        import highway_oracle
+
+        return highway_oracle.main_oracle(args, spec, seeds)
     if args.config is None:
         default = os.path.join(ROOT, "deploy", spec["config"])
         args.config = default if os.path.exists(default) else None
-
-    import gymnasium as gym
-    import highway_env  # noqa: F401  (registers the environments)
+    reachable = (load_ceiling(args.ceiling, args.env, spec, args.policy_frequency)
+                 if args.ceiling else None)
 
     period = 1.0 / args.policy_frequency
-    cfg = env_config(args.policy, args.policy_frequency, spec)
-    env = spec["make"](cfg) if spec["make"] else gym.make(args.env, config=cfg)
+    env = make_env(args.env, args.policy, args.policy_frequency, spec)
     policy = ConcordPolicy(args, spec, period) if args.policy == "concord" else None
     episodes = []
     started = time.monotonic()
     try:
-        for seed in range(args.first_seed, args.first_seed + args.seeds):
+        for seed in seeds:
             e = run_episode(env, policy, args.policy, seed, period, spec, args.verbose)
             episodes.append(e)
-            outcome = ("COLLISION" if e["crashed"] else "arrived" if e["arrived"]
-                       else "decision timeout" if e["timed_out"] else "not arrived")
+            outcome = {"crash": "COLLISION", "arrived": "arrived",
+                       "decision_timeout": "decision timeout",
+                       "time_limit": "time limit"}[e["outcome"]]
             print(f"seed {seed:3d}: {outcome:16s} {e['sim_time_s']:5.1f} s simulated, "
                   f"mean speed {e['mean_speed']:4.1f} m/s, route {e['final_progress_m']:5.1f} m, "
-                  f"minimum-risk {e['minimum_risk']}",
+                  f"standing {e['standing_s']:4.1f} s, others' braking "
+                  f"{e['others_max_decel_mps2']:4.1f} m/s², minimum-risk {e['minimum_risk']}",
                   flush=True)
     finally:
         if policy is not None:
@@ -679,14 +976,32 @@ def main(argv=None):
         env.close()
     s = summarize(args.env, args.policy, episodes)
     s["policy_frequency_hz"] = args.policy_frequency
+    s["duration_s"] = spec["duration_s"]
     s["wall_time_s"] = time.monotonic() - started
+    if reachable is not None:
+        s["ceiling"] = ceiling_report(episodes, reachable)
     print(f"decisions {s['decisions']} for {s['steps']} steps, minimum-risk "
           f"{s['minimum_risk_decisions']}, decision timeouts {s['timeouts']}")
+    for line in detail_lines(s):
+        print(line)
     print(summary_line(s))
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:
             json.dump({"summary": s, "episodes": episodes, "args": vars(args)}, f, indent=1)
     return s
+
+
+def parse_seeds(text):
+    """"0-99,500-599,7" -> [0, ..., 99, 500, ..., 599, 7]."""
+    seeds = []
+    for part in text.split(","):
+        part = part.strip()
+        if "-" in part:
+            a, b = part.split("-")
+            seeds.extend(range(int(a), int(b) + 1))
+        elif part:
+            seeds.append(int(part))
+    return seeds
 
 
 if __name__ == "__main__":

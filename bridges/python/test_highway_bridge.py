@@ -4,8 +4,16 @@ Needs the packages of requirements.txt (highway-env, iceoryx2) and a built `conc
 ($CONCORD_BIN, default target/debug/concord). Runs the bridge's command line for two seeds of
 intersection-v0 (about 20 s), one seed of merge-v0 (a few seconds) and one seed of a baseline,
 which needs no core.
+
+Without Concord (constant DiscreteMetaAction baselines, about a minute in all): intersection-v2
+and merge-v1 in lock-step, --duration, the per-episode outcome kind, standing time and other
+vehicles' braking, the ceiling report, and the oracle (highway_oracle.py): a deep copy of the
+environment replays like a fresh reset, its faster stepping changes no state, and on a seed
+where constant FASTER crashes a profile of the small family arrives, which a plain replay
+confirms.
 """
 
+import copy
 import json
 import math
 import os
@@ -15,6 +23,8 @@ import sys
 import tempfile
 import unittest
 
+import numpy as np
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
 CONCORD = os.environ.get("CONCORD_BIN", os.path.join(ROOT, "target", "debug", "concord"))
@@ -22,13 +32,15 @@ SUMMARY = re.compile(r"^(\S+) (\w+): (\d+) seeds, collisions (\d+\.\d) %, "
                      r"success (\d+\.\d) %, mean speed (\d+\.\d) m/s$")
 
 
-def run_bridge(*args, env="intersection-v0"):
+def run_bridge(*args, env="intersection-v0", check=True):
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "result.json")
         proc = subprocess.run(
             [sys.executable, "-W", "ignore", os.path.join(HERE, "highway_bridge.py"),
              "--env", env, "--json", out, *args],
             cwd=HERE, capture_output=True, text=True, timeout=120)
+        if not check:
+            return proc
         if proc.returncode != 0:
             raise AssertionError(f"bridge failed ({proc.returncode}):\n{proc.stdout}\n{proc.stderr}")
         with open(out, encoding="utf-8") as f:
@@ -187,6 +199,331 @@ class HighwayBridge(unittest.TestCase):
         self.assertEqual(s["decisions"], 0)
         # intersection-v0's ego starts at its lane's 10 m/s and IDLE holds the 9 m/s set-point.
         self.assertGreater(s["mean_speed_mps"], 8.0)
+
+    def test_intersection_v2_in_lock_step_with_a_baseline(self):
+        stdout, result = run_bridge("--policy", "faster", "--seeds", "1", "--concord",
+                                    "/nonexistent/concord", env="intersection-v2")
+        s = self.check_summary(stdout, result, "faster", 1, env="intersection-v2")
+        self.assertEqual(s["decisions"], 0)
+        e = result["episodes"][0]
+        # Every episode ends: a collision, an arrival or intersection's 13 s (13.2 s at 5 Hz:
+        # highway-env's clock sums 0.2 s steps, which reach 13 only after 66 of them).
+        self.assertTrue(e["crashed"] or e["arrived"] or e["sim_time_s"] >= 13.0, e)
+        self.assertEqual(e["arrived"], e["final_progress_m"] > 145.0 and not e["crashed"], e)
+
+    def test_merge_v1_in_lock_step_with_a_baseline(self):
+        stdout, result = run_bridge("--policy", "slower", "--seeds", "1", "--concord",
+                                    "/nonexistent/concord", env="merge-v1")
+        s = self.check_summary(stdout, result, "slower", 1, env="merge-v1", top=40.0)
+        e = result["episodes"][0]
+        self.assertTrue(e["crashed"] or e["sim_time_s"] >= 40.0 - 1e-6
+                        or e["final_position"][0] > 370.0, e)
+        self.assertEqual(e["arrived"], e["final_position"][0] > 370.0 and not e["crashed"])
+        self.assertLess(s["mean_speed_mps"], 25.0)  # SLOWER follows the lanes' 20 m/s traffic
+
+    def test_duration_overrides_the_episode_length(self):
+        # intersection: highway-env's own "duration", which ends the episode at the first step
+        # whose clock (a float sum of 0.2 s steps) reaches it: 6 s after 30 steps, but 13 s
+        # only after 66 (13.2 s).
+        clock, steps = 0.0, 0
+        while clock < 6.0:
+            clock += 1 / 5
+            steps += 1
+        _, result = run_bridge("--policy", "slower", "--seeds", "1", "--duration", "6",
+                               "--concord", "/nonexistent/concord")
+        e = result["episodes"][0]
+        self.assertEqual(e["outcome"], "time_limit", e)
+        self.assertEqual(e["steps"], steps)
+        self.assertEqual(result["summary"]["duration_s"], 6.0)
+        # merge: the bridge's own time limit.
+        _, result = run_bridge("--policy", "slower", "--seeds", "1", "--duration", "3",
+                               "--concord", "/nonexistent/concord", env="merge-v1")
+        e = result["episodes"][0]
+        self.assertEqual(e["outcome"], "time_limit", e)
+        self.assertAlmostEqual(e["sim_time_s"], 3.0, delta=1e-6)
+
+
+class Environments(unittest.TestCase):
+    """The v1/v2 variants are highway-env's connected-lane classes with the v0 settings."""
+
+    def test_variants_build_highway_envs_connected_lane_classes(self):
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+        from highway_env.envs.intersection_env import ConnectedLaneIntersectionEnv
+        from highway_env.envs.merge_env import ConnectedLaneMergeEnv, MergeEnv
+
+        for name, cls, connected in (("intersection-v2", ConnectedLaneIntersectionEnv, True),
+                                     ("merge-v1", ConnectedLaneMergeEnv, True),
+                                     ("merge-v0", MergeEnv, False)):
+            spec = hb.with_duration(hb.ENVS[name], None)
+            env = hb.make_env(name, "concord", 5, spec)
+            try:
+                u = env.unwrapped
+                self.assertIsInstance(u, cls, name)
+                env.reset(seed=0)
+                self.assertEqual(u.road.neighbour_vehicles_connected_lanes, connected, name)
+                # merge-v1 needs the reward fix for a ContinuousAction, as merge-v0 does.
+                env.step(np.zeros(2, dtype=np.float32))
+                self.assertEqual(type(u.action_type).__name__, "ContinuousAction")
+            finally:
+                env.close()
+        self.assertEqual(hb.ENVS["intersection-v2"]["geometry"],
+                         hb.ENVS["intersection-v0"]["geometry"])
+        self.assertEqual(hb.ENVS["merge-v1"]["time_limit_s"], 40.0)
+        spec = hb.with_duration(hb.ENVS["intersection-v2"], 20)
+        self.assertEqual(hb.env_config("concord", 5, spec)["duration"], 20.0)
+        self.assertIsNone(spec["time_limit_s"])
+        spec = hb.with_duration(hb.ENVS["merge-v1"], 25)
+        self.assertEqual(spec["time_limit_s"], 25.0)
+        self.assertNotIn("duration", hb.env_config("concord", 5, spec))
+
+
+class EpisodeFields(unittest.TestCase):
+    """Outcome kinds, standing time, other vehicles' braking and the ceiling report."""
+
+    @classmethod
+    def setUpClass(cls):
+        # A synthetic ceiling: seed 0 reachable, seed 1 not.
+        cls.tmp = tempfile.TemporaryDirectory()
+        cls.ceiling = os.path.join(cls.tmp.name, "ceiling.json")
+        with open(cls.ceiling, "w", encoding="utf-8") as f:
+            json.dump({"oracle": {"env": "intersection-v0", "duration_s": 13.0,
+                                  "policy_frequency_hz": 5},
+                       "seeds": [{"seed": 0, "reachable": True},
+                                 {"seed": 1, "reachable": False},
+                                 {"seed": 2, "reachable": False, "undecided": True}]}, f)
+        cls.stdout, cls.result = run_bridge("--policy", "slower", "--seeds", "3", "--concord",
+                                            "/nonexistent/concord", "--ceiling", cls.ceiling)
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.tmp.cleanup()
+
+    def test_fields_are_present_and_consistent(self):
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+
+        s, episodes = self.result["summary"], self.result["episodes"]
+        self.assertEqual(sum(s["outcomes"].values()), s["seeds"])
+        self.assertEqual(set(s["outcomes"]), set(hb.OUTCOMES))
+        for e in episodes:
+            self.assertEqual(e["outcome"], hb.outcome_kind(e))
+            self.assertEqual(e["outcome"] == "crash", e["crashed"])
+            self.assertEqual(e["outcome"] == "arrived", e["arrived"])
+            self.assertTrue(0.0 <= e["standing_s"] <= e["sim_time_s"] + 1e-9, e)
+            self.assertGreaterEqual(e["others_max_decel_mps2"], 0.0)
+            self.assertLessEqual(e["others_max_decel_mps2"], 8.0)  # IDM's ACC_MAX is 6
+            self.assertGreater(e["min_distance_m"], 0.0)
+        # SLOWER stops before the junction and waits out the episode (13.2 s).
+        for e in episodes:
+            self.assertEqual(e["outcome"], "time_limit", e)
+            self.assertGreater(e["standing_s"], 5.0, e)
+        standing = [e["standing_s"] for e in episodes]
+        self.assertAlmostEqual(s["standing_s"]["mean"], sum(standing) / len(standing))
+        self.assertAlmostEqual(s["standing_s"]["max"], max(standing))
+        decel = [e["others_max_decel_mps2"] for e in episodes]
+        b = s["others_braking"]
+        self.assertAlmostEqual(b["max_mps2"], max(decel))
+        self.assertAlmostEqual(b["mean_of_episode_max_mps2"], sum(decel) / len(decel))
+        self.assertEqual(b["episodes_harder_than_threshold"], sum(d > 3.0 for d in decel))
+        self.assertAlmostEqual(s["min_distance_m"]["min"],
+                               min(e["min_distance_m"] for e in episodes))
+        # The printed lines carry the same counts.
+        o = s["outcomes"]
+        self.assertIn(f"outcomes: arrived {o['arrived']}, time_limit {o['time_limit']}, crash "
+                      f"{o['crash']}, decision_timeout {o['decision_timeout']}", self.stdout)
+        self.assertIn(f"max {s['standing_s']['max']:.2f} s per episode", self.stdout)
+
+    def test_ceiling_report(self):
+        c = self.result["summary"]["ceiling"]
+        self.assertEqual(c["seeds_in_ceiling"], 2)
+        self.assertEqual(c["reachable"], 1)
+        self.assertEqual(c["arrived_on_reachable"], 0)  # SLOWER never arrives
+        self.assertEqual(c["success_of_reachable"], 0.0)
+        self.assertEqual(c["reachable_failed"], [0])
+        self.assertEqual(c["unreachable_failed"], [1])
+        self.assertEqual(c["unreachable_passed"], [])
+        self.assertEqual(c["undecided"], [2])  # left out of the shares
+        self.assertEqual(c["missing_seeds"], [])
+        self.assertIn("ceiling: 1 of 2 seeds reachable, arrived on 0 of them", self.stdout)
+        self.assertIn("ceiling: unreachable seeds failed [1], passed []", self.stdout)
+        # A ceiling measured at another duration is refused.
+        proc = run_bridge("--policy", "slower", "--seeds", "1", "--duration", "20",
+                          "--ceiling", self.ceiling, check=False)
+        self.assertNotEqual(proc.returncode, 0)
+        self.assertIn("other settings", proc.stderr)
+
+    def test_others_braking_counts_near_living_vehicles_only(self):
+        sys.path.insert(0, HERE)
+        from types import SimpleNamespace as NS
+
+        import highway_bridge as hb
+
+        def car(x, speed, crashed=False):
+            return NS(position=np.array([x, 0.0]), speed=speed, crashed=crashed)
+
+        ego = car(0.0, 5.0)
+        near, far, wrecked, leaving = car(10.0, 8.0), car(50.0, 8.0), car(5.0, 8.0), car(20.0, 8.0)
+        u = NS(vehicle=ego, road=NS(vehicles=[ego, near, far, wrecked, leaving]))
+        m = hb.OthersMonitor(u, 0.2)
+        self.assertAlmostEqual(m.min_distance, 5.0)
+        near.speed = 7.0      # 5 m/s² at 10 m: counts
+        far.speed = 2.0       # 30 m/s² at 50 m: too far
+        wrecked.speed = 0.0   # 40 m/s², crashed: highway-env's crash model, not braking
+        wrecked.crashed = True
+        newcomer = car(15.0, 0.0)  # first seen now: no previous speed
+        u.road.vehicles = [ego, near, far, wrecked, newcomer]  # leaving is gone
+        m.observe(u, 0.2)
+        self.assertAlmostEqual(m.max_decel, 5.0)
+        self.assertAlmostEqual(m.max_decel_t, 0.2)
+        # Within 30 m at either end of the step: a car braking as it comes into range counts.
+        far.position = np.array([29.0, 0.0])
+        far.speed = 0.0       # 10 m/s², 50 m -> 29 m
+        m.observe(u, 0.4)
+        self.assertAlmostEqual(m.max_decel, 10.0)
+        self.assertEqual(hb.outcome_kind({"crashed": True, "arrived": False, "timed_out": False}),
+                         "crash")
+        self.assertEqual(hb.outcome_kind({"crashed": False, "arrived": False,
+                                          "timed_out": True}), "decision_timeout")
+
+
+def _states(u):
+    sys.path.insert(0, HERE)
+    import highway_oracle as ho
+
+    return ho.vehicle_states(u)
+
+
+# Actions for the determinism tests: ContinuousAction units (acceleration, steering).
+ACTIONS = [np.array([0.4, 0.0], dtype=np.float32)] * 6 + \
+          [np.array([-0.6, 0.1], dtype=np.float32)] * 6 + \
+          [np.array([0.9, -0.05], dtype=np.float32)] * 12
+
+
+class OracleReplay(unittest.TestCase):
+    """The oracle's branches replay exactly what a normal run would simulate."""
+
+    def make(self, name="intersection-v2"):
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+
+        return hb.make_env(name, "concord", 5, hb.with_duration(hb.ENVS[name], None))
+
+    def reference(self, env, seed):
+        env.reset(seed=seed)
+        out = []
+        for a in ACTIONS:
+            env.step(a)
+            out.append(_states(env.unwrapped))
+        return out
+
+    def test_a_deep_copy_replays_like_a_fresh_reset(self):
+        env = self.make()
+        try:
+            seed = 3
+            ref = self.reference(env, seed)
+            self.assertGreater(len(ref[-1][0]), 5)  # there is traffic to get wrong
+            # A copy made right after the reset.
+            env.reset(seed=seed)
+            c = copy.deepcopy(env.unwrapped)
+            for k, a in enumerate(ACTIONS):
+                c.step(a)
+                self.assertEqual(_states(c), ref[k], f"copy at 0 s, step {k}")
+            # A copy made mid-episode, and the original after it was copied.
+            env.reset(seed=seed)
+            for a in ACTIONS[:8]:
+                env.step(a)
+            c = copy.deepcopy(env.unwrapped)
+            for k, a in enumerate(ACTIONS[8:], start=8):
+                c.step(a)
+                env.step(a)
+                self.assertEqual(_states(c), ref[k], f"copy at 1.6 s, step {k}")
+                self.assertEqual(_states(env.unwrapped), ref[k], f"original, step {k}")
+        finally:
+            env.close()
+
+    def test_the_oracles_stepping_changes_no_state(self):
+        sys.path.insert(0, HERE)
+        import highway_oracle as ho
+
+        env = self.make()
+        try:
+            seed = 3
+            ref = self.reference(env, seed)
+            env.reset(seed=seed)
+            c = copy.deepcopy(env.unwrapped)
+            with ho.fast_regulation():
+                for k, a in enumerate(ACTIONS):
+                    ho.fast_step(c, a)
+                    self.assertEqual(_states(c), ref[k], f"step {k}")
+        finally:
+            env.close()
+
+    def test_the_oracle_reaches_a_seed_where_faster_crashes(self):
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+        import highway_oracle as ho
+
+        name, seeds = "intersection-v0", [3, 4]
+        spec = hb.with_duration(hb.ENVS[name], None)
+        # Constant FASTER (a normal baseline run) crashes on seed 3.
+        env = hb.make_env(name, "faster", 5, spec)
+        try:
+            e = hb.run_episode(env, None, "faster", seeds[0], 0.2, spec)
+        finally:
+            env.close()
+        self.assertIn(e["outcome"], ("crash", "time_limit"), e)
+        family = ho.FAMILIES["small"]
+        profiles = ho.profiles_of(family)
+        doc = ho.run_oracle(name, spec, seeds, family)
+        self.assertEqual([r["seed"] for r in doc["seeds"]], seeds)
+        for r in doc["seeds"]:
+            self.assertIsInstance(r["reachable"], bool)
+            self.assertEqual(len(r["outcomes"]), len(profiles))
+            self.assertEqual(sum(r["counts"].values()), len(profiles))
+            self.assertEqual(r["reachable"], r["counts"]["arrived"] > 0)
+        r = doc["seeds"][0]
+        self.assertTrue(r["reachable"], r)
+        self.assertEqual(doc["summary"]["reachable"], sum(x["reachable"] for x in doc["seeds"]))
+        # Replay the first arriving profile with plain env.step (no oracle machinery) from a
+        # fresh reset: it arrives without a collision, when the oracle said.
+        i = next(k for k, o in enumerate(r["outcomes"]) if o[0] == "arrived")
+        env = hb.make_env(name, "concord", 5, spec)
+        try:
+            env.reset(seed=seeds[0])
+            u = env.unwrapped
+            root, arrival = ho.plan_tree(u, profiles, 0.2)
+            node, actions = root, []
+            while node.children:
+                a, node = next((a, n) for a, n in node.children.values() if i in n.below)
+                actions.append(a)
+            self.assertEqual(len(actions), arrival[i])
+            for a in actions:
+                _, _, terminated, truncated, _ = env.step(a)
+            self.assertFalse(u.vehicle.crashed)
+            self.assertTrue(u.has_arrived(u.vehicle))
+            self.assertAlmostEqual(u.time, r["outcomes"][i][1], delta=1e-6)
+        finally:
+            env.close()
+        # The first-arrival search agrees on reachability.
+        doc1 = ho.run_oracle(name, spec, seeds, family, first=True)
+        self.assertEqual([x["reachable"] for x in doc1["seeds"]],
+                         [x["reachable"] for x in doc["seeds"]])
+        # A longer episode reuses the reachable seeds and searches the others only.
+        with tempfile.TemporaryDirectory() as tmp:
+            path = os.path.join(tmp, "oracle.json")
+            with open(path, "w", encoding="utf-8") as f:
+                json.dump(doc, f)
+            spec20 = hb.with_duration(hb.ENVS[name], 20)
+            reuse = ho.reusable(path, name, 20.0, 5, family)
+            self.assertEqual(set(reuse[0]), {x["seed"] for x in doc["seeds"] if x["reachable"]})
+            with self.assertRaises(SystemExit):
+                ho.reusable(path, name, 10.0, 5, family)
+            doc20 = ho.run_oracle(name, spec20, seeds, family, first=True, reuse=reuse)
+        self.assertEqual(doc20["seeds"][0]["reused_from_duration_s"], 13.0)
+        self.assertNotIn("reused_from_duration_s", doc20["seeds"][1])
+        self.assertGreater(doc20["seeds"][1]["simulated_steps"], 0)
+        self.assertEqual(doc20["oracle"]["duration_s"], 20.0)
 
 
 if __name__ == "__main__":
