@@ -8,7 +8,7 @@
 //! frames in [FROM_S, TO_S] are printed. Each maneuver's statistics come from a fresh Monte
 //! Carlo run, so they can differ from the decision's in which candidates were drawn.
 
-use concord_core::choice::{Maneuver, MANEUVERS};
+use concord_core::choice::{self, Maneuver, MANEUVERS};
 use concord_core::scene::{AgentState, BuiltIn, Morphology, Scene, TurnSignal, Vec2};
 use concord_core::trajectory::PlanStats;
 use concord_core::DecisionCore;
@@ -98,14 +98,27 @@ fn main() {
                 pr.s_m
             );
         }
-        for c in core.conflicts().pairs() {
+        let turn = ch.profiles[Maneuver::TurnLeft.index()];
+        for (c, y) in core.conflicts().pairs().iter().zip(core.yields()) {
+            let ego = choice::ego_interval(&turn, scene.ego.speed(), c);
+            let other = choice::proceeding_interval(c, &p.interaction);
             println!(
-                "   conflict agent {} de={:.1} da={:.1} te={:.2} ta={:.2}",
+                "   conflict agent {} de={:.1} da={:.1} te={:.2} ta={:.2} {:?} yields {:.2} (Y {:.2} P {:.2}{}) turn-left risk {:.2}: ego [{:.1}, {:.1}] s, other [{:.1}, {:.1}] s",
                 scene.agents[c.agent as usize].id,
                 c.ego_dist_m,
                 c.agent_dist_m,
                 c.ego_ttc_s,
-                c.agent_ttc_s
+                c.agent_ttc_s,
+                c.right_of_way,
+                y,
+                c.intent.yielding,
+                c.intent.proceeding,
+                if c.intent.committed { ", committed" } else { "" },
+                choice::conflict_risk(&turn, scene.ego.speed(), c, *y, &p.interaction),
+                ego.0,
+                ego.1,
+                other.0,
+                other.1
             );
         }
         if std::env::var_os("CONCORD_REPLAY_BOXES").is_some() {

@@ -362,13 +362,22 @@ pub fn preferences(
     (ws.max(0.1), we.max(0.1))
 }
 
-/// Time for a road user at speed `v` accelerating at `a` (≥ 0, no cap) to cover `d` m, s.
-fn time_to_cover(v: f64, a: f64, d: f64) -> f64 {
+/// Time for a road user at speed `v` accelerating at `a` (≥ 0) up to `v_top` to cover `d` m,
+/// s.
+fn time_to_cover(v: f64, a: f64, v_top: f64, d: f64) -> f64 {
     if d <= 0.0 {
-        0.0
-    } else if a > 1e-9 {
-        (-v + sqrt(v * v + 2.0 * a * d)) / a
-    } else if v > 1e-9 {
+        return 0.0;
+    }
+    let v_top = v_top.max(v);
+    if a > 1e-9 && v_top > v {
+        let ramp_t = (v_top - v) / a;
+        let ramp_d = 0.5 * (v + v_top) * ramp_t;
+        if d <= ramp_d {
+            return (-v + sqrt(v * v + 2.0 * a * d)) / a;
+        }
+        return ramp_t + (d - ramp_d) / v_top;
+    }
+    if v > 1e-9 {
         d / v
     } else {
         f64::INFINITY
@@ -377,14 +386,16 @@ fn time_to_cover(v: f64, a: f64, d: f64) -> f64 {
 
 /// The other's occupancy of its passage if it proceeds, [enter, exit] in s from now: it
 /// enters at the earliest when accelerating at its shown acceleration or
-/// `proceed_accel_mps2`, whichever is higher, and leaves at the latest when holding its speed
-/// (at least `proceed_min_speed_mps`).
+/// `proceed_accel_mps2`, whichever is higher, up to `proceed_top_speed_mps`, and leaves at the
+/// latest when holding its speed (at least `proceed_min_speed_mps`).
 pub fn proceeding_interval(c: &ConflictPair, ip: &InteractionParams) -> (f64, f64) {
     let v = c.agent_speed_mps;
     let a = c.agent_accel_mps2.max(ip.proceed_accel_mps2);
+    let top = ip.proceed_top_speed_mps;
     let [d_in, d_out] = c.agent_pass_m;
-    let t_in = time_to_cover(v, a, d_in);
-    let t_out = time_to_cover(v, a, d_out).max(d_out.max(0.0) / v.max(ip.proceed_min_speed_mps));
+    let t_in = time_to_cover(v, a, top, d_in);
+    let t_out =
+        time_to_cover(v, a, top, d_out).max(d_out.max(0.0) / v.max(ip.proceed_min_speed_mps));
     (t_in, t_out)
 }
 

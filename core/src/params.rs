@@ -176,6 +176,9 @@ pub struct InteractionParams {
     pub proceed_accel_mps2: f64,
     /// Slowest speed at which a proceeding road user crosses, m/s (its latest exit).
     pub proceed_min_speed_mps: f64,
+    /// Fastest a proceeding road user accelerates to, m/s (its earliest entry; its current
+    /// speed if higher): the road's speed limit.
+    pub proceed_top_speed_mps: f64,
     /// Post-encroachment margin the ego needs to go first, before another road user's
     /// proceeding occupancy of the conflict zone, s.
     pub pet_go_s: f64,
@@ -213,6 +216,7 @@ impl Default for InteractionParams {
             standing_yield: 0.7,
             proceed_accel_mps2: 1.5,
             proceed_min_speed_mps: 2.0,
+            proceed_top_speed_mps: 14.0,
             pet_go_s: 2.0,
             pet_behind_s: 1.6,
             max_imposed_decel_mps2: 3.0,

@@ -26,7 +26,9 @@ pub const MAX_STEPS: usize = 64;
 /// Trajectory points: t = 0 and every step.
 pub const MAX_POINTS: usize = MAX_STEPS + 1;
 /// Occupancy boxes per time step; on overflow boxes are merged conservatively.
-pub const MAX_BOXES: usize = 8;
+pub const MAX_BOXES: usize = 16;
+/// Consecutive time steps of a road user's passage whose boxes make one margin box.
+const MARGIN_CHUNK: usize = 4;
 /// Bins of the curvature speed-cap table.
 pub const VCAP_BINS: usize = 256;
 /// Below this speed at the end of the horizon a candidate stands, m/s.
@@ -708,22 +710,35 @@ impl Planner {
             if behind + ahead == 0 {
                 continue;
             }
-            for step in 0..self.steps {
-                let union = self.sweep[step..=step + behind + ahead]
-                    .iter()
-                    .flatten()
-                    .fold(None::<[f64; 4]>, |u, b| {
-                        Some(u.map_or(*b, |u| {
-                            [
-                                u[0].min(b[0]),
-                                u[1].max(b[1]),
-                                u[2].min(b[2]),
-                                u[3].max(b[3]),
-                            ]
-                        }))
-                    });
-                if let Some([s_lo, s_hi, l_lo, l_hi]) = union {
-                    self.occupancy.add(step, s_lo, s_hi, l_lo, l_hi, true);
+            // Margins: the in-passage boxes in chunks of consecutive steps (the union of a
+            // whole window would cover far more than the crossing where the agent's path is
+            // curved in the ego's frame); each step gets every chunk that overlaps its window
+            // [step, step + behind + ahead].
+            let mut k = 0;
+            while k < total {
+                if self.sweep[k].is_none() {
+                    k += 1;
+                    continue;
+                }
+                let first = k;
+                let mut u = self.sweep[k].expect("checked");
+                k += 1;
+                while k < total && k - first < MARGIN_CHUNK {
+                    let Some(b) = self.sweep[k] else {
+                        break;
+                    };
+                    u = [
+                        u[0].min(b[0]),
+                        u[1].max(b[1]),
+                        u[2].min(b[2]),
+                        u[3].max(b[3]),
+                    ];
+                    k += 1;
+                }
+                let last = k - 1;
+                let steps = first.saturating_sub(behind + ahead)..=last.min(self.steps - 1);
+                for step in steps {
+                    self.occupancy.add(step, u[0], u[1], u[2], u[3], true);
                 }
             }
         }
