@@ -50,6 +50,15 @@ fn main() {
     };
     let (from, to) = (time(2, 0.0), time(3, f64::INFINITY));
     let morph = Morphology::built_in(BuiltIn::HighwayEnvIntersection);
+    if std::env::var_os("CONCORD_REPLAY_ZONES").is_some() {
+        for c in morph.conflicts() {
+            println!(
+                "conflict lanes {} x {} {:?} at ({:.1}, {:.1}): zone on {} [{:.1}, {:.1}], on {} [{:.1}, {:.1}]",
+                c.lane_a, c.lane_b, c.kind, c.pos.x, c.pos.y, c.lane_a, c.zone_a[0], c.zone_a[1],
+                c.lane_b, c.zone_b[0], c.zone_b[1]
+            );
+        }
+    }
     let mut core = Box::new(DecisionCore::new(cfg.core, morph).expect("valid parameters"));
     let p = cfg.core;
     for line in read(&args[1]).lines() {

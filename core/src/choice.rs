@@ -159,15 +159,15 @@ pub struct EgoContext {
     pub max_brake: f64,
     pub min_duration: f64,
     pub max_duration: f64,
-    /// Horizon of the planner's checks, s.
-    pub plan_horizon_s: f64,
+    /// Time into a plan at which a yielding ego must still be able to stop before its yield
+    /// point (`trajectory.yield_check_s`), s.
+    pub yield_check_s: f64,
 }
 
 /// Below this speed the ego counts as stopped for the idle penalty, m/s.
 const IDLE_SPEED_MPS: f64 = 0.1;
-/// A yielding ego more than [`CREEP_FROM_M`] short of its yield point and too slow to reach it
-/// with one stopping polynomial creeps up to it at this speed at most, m/s.
-const CREEP_MPS: f64 = 2.0;
+/// A yielding ego more than this short of its yield point and too far to reach it with one
+/// stopping polynomial approaches it (see [`profile`]), m.
 const CREEP_FROM_M: f64 = 1.0;
 
 /// Profile that goes from the ego's speed towards `target` (clamped to the speed cap) at the
@@ -209,12 +209,20 @@ pub fn profile(m: Maneuver, ctx: &EgoContext, p: &ChoiceParams) -> Profile {
         Maneuver::TurnLeft | Maneuver::TurnRight => toward(cap),
         Maneuver::Decelerate => {
             let d = ctx.yield_distance;
-            if d.is_finite() && d > CREEP_FROM_M && 2.0 * d > v0 * ctx.max_duration {
-                // Too slow to reach the yield point with one stopping polynomial: creep up to
-                // it, slowly enough to stop there after the planning horizon.
+            // The approach speed v_a from which the ego, holding v_a for the yield check time
+            // τ and then braking at `decelerate_mps2` (b), stops at the yield point:
+            // v_a·τ + v_a²/(2b) = d. Near the point this is a creep.
+            let (b, tau) = (p.decelerate_mps2, ctx.yield_check_s);
+            let approach = b * (sqrt(tau * tau + 2.0 * d / b) - tau);
+            if d.is_finite()
+                && d > CREEP_FROM_M
+                && (v0 < approach || 2.0 * d > v0 * ctx.max_duration)
+            {
+                // Slower than v_a, or too far to reach the point with one stopping
+                // polynomial: approach it at v_a.
                 Profile {
                     stop_m: d,
-                    ..toward(CREEP_MPS.min(0.8 * d / ctx.plan_horizon_s))
+                    ..toward(approach.min(p.desired_speed_mps))
                 }
             } else if d.is_finite() && d > 0.0 {
                 // Stop at the yield point: a quartic with v_T = a_T = 0 from rest acceleration

@@ -377,10 +377,22 @@ impl DecisionCore {
             executed = Some((m, best, stats));
         }
         if executed.is_none() {
-            // The logit choice, then "decelerate" unless that was the choice.
-            let order = [self.choice.choice, Maneuver::Decelerate];
-            let tries = if order[0] == order[1] { 1 } else { 2 };
-            for m in order.into_iter().take(tries) {
+            // The logit choice, then "decelerate", then the others by corrected probability:
+            // every executed plan passed the same limit, collision and margin checks.
+            let mut order = [
+                self.choice.choice,
+                Maneuver::Decelerate,
+                Maneuver::Accelerate,
+                Maneuver::KeepSpeed,
+                Maneuver::TurnLeft,
+                Maneuver::TurnRight,
+            ];
+            let pc = self.choice.p_corrected;
+            order[2..].sort_unstable_by(|a, b| pc[b.index()].total_cmp(&pc[a.index()]));
+            for (k, m) in order.into_iter().enumerate() {
+                if order[..k].contains(&m) {
+                    continue;
+                }
                 // Reuse the advice's safety check when it planned this maneuver already.
                 let (best, stats) = match planned {
                     Some((pm, best, stats)) if pm == m => (best, stats),
@@ -467,6 +479,7 @@ impl DecisionCore {
             f.accel = c.agent_accel_mps2;
             f.pet_s = [ip.pet_behind_s, ip.pet_go_s];
             f.pass_m = c.agent_pass_m;
+            f.ego_pass_m = c.ego_pass_m;
             if y >= ip.trust_yield
                 && !c.intent.committed
                 && c.intent.required_decel_mps2 <= ip.max_imposed_decel_mps2
@@ -529,7 +542,7 @@ impl DecisionCore {
             max_brake: p.trajectory.max_brake_mps2,
             min_duration: p.trajectory.min_duration_s,
             max_duration: p.trajectory.max_duration_s,
-            plan_horizon_s: p.trajectory.horizon_s,
+            yield_check_s: p.trajectory.yield_check_s,
         }
     }
 
@@ -658,7 +671,11 @@ fn frenet_start(ego: &AgentState, lane: &Lane, p: &Params) -> FrenetState {
     let dir = ego.direction();
     let speed = ego.speed();
     let ds = flush(speed * dir.dot(t));
-    let releasable = libm::sqrt(2.0 * p.trajectory.max_jerk_mps3 * ds.max(0.0));
+    // A braking ego near a stop is planned from a deceleration it can release in time: within
+    // the jerk limit, and such that a quartic stop of the shortest duration still ends at a
+    // standstill without reversing (it decelerates monotonically only for T ≤ 3 v / |a|).
+    let releasable = libm::sqrt(2.0 * p.trajectory.max_jerk_mps3 * ds.max(0.0))
+        .min(3.0 * ds.max(0.0) / p.trajectory.min_duration_s);
     let a_lon = (ego.longitudinal_accel() * dir.dot(t)).clamp(
         -p.trajectory.max_brake_mps2.min(releasable),
         p.trajectory.max_accel_mps2,

@@ -313,6 +313,11 @@ pub struct TrajectoryParams {
     pub margin_growth_mps: f64,
     /// Stopping margin before a conflict zone, m.
     pub stop_margin_m: f64,
+    /// A yielding candidate must still be able to stop before its yield point at this time
+    /// into the plan (or at the horizon, if shorter), s. Replanning every cycle keeps that
+    /// promise for later times, so the ego can approach briskly instead of planning a stop
+    /// at the horizon's end.
+    pub yield_check_s: f64,
 }
 
 impl Default for TrajectoryParams {
@@ -346,6 +351,7 @@ impl Default for TrajectoryParams {
             safety_margin_m: 0.5,
             margin_growth_mps: 0.2,
             stop_margin_m: 1.0,
+            yield_check_s: 1.0,
         }
     }
 }
@@ -398,6 +404,12 @@ impl Params {
         }
         if t.dt_s <= 0.0 || t.horizon_s <= 0.0 || t.horizon_s / t.dt_s > MAX_STEPS as f64 + 1e-6 {
             return bad("trajectory.horizon_s", "horizon_s / dt_s must be in 1..=64");
+        }
+        if !(t.yield_check_s > 0.0 && t.yield_check_s <= t.horizon_s) {
+            return bad(
+                "trajectory.yield_check_s",
+                "need 0 < yield_check_s <= horizon_s",
+            );
         }
         if !(t.min_duration_s > 0.0 && t.min_duration_s <= t.max_duration_s) {
             return bad(

@@ -202,11 +202,21 @@ impl Occupancy {
         self.step_hi[..steps].fill(f64::NEG_INFINITY);
     }
 
-    /// Adds a box at `step` (`margin`: a post-encroachment margin, not a footprint); when the
-    /// step is full, it is merged into the box nearest in s, a footprint unless both were
-    /// margins.
+    /// Adds a box at `step` (`margin`: a post-encroachment margin, not a footprint); a box inside
+    /// another that blocks at least as much is dropped; when the step is full, it is merged into the box whose area grows least, one of its own kind if
+    /// there is one (a footprint merged with a margin stays a footprint).
     fn add(&mut self, step: usize, s_lo: f64, s_hi: f64, l_lo: f64, l_hi: f64, margin: bool) {
         let k = self.n[step] as usize;
+        let covered = (0..k).any(|b| {
+            (margin || !self.margin[step][b])
+                && self.s_lo[step][b] <= s_lo
+                && self.s_hi[step][b] >= s_hi
+                && self.l_lo[step][b] <= l_lo
+                && self.l_hi[step][b] >= l_hi
+        });
+        if covered {
+            return;
+        }
         if k < MAX_BOXES {
             self.s_lo[step][k] = s_lo;
             self.s_hi[step][k] = s_hi;
@@ -215,13 +225,17 @@ impl Occupancy {
             self.margin[step][k] = margin;
             self.n[step] += 1;
         } else {
-            let mid = 0.5 * (s_lo + s_hi);
             let mut best = 0;
-            let mut best_d = f64::INFINITY;
+            let mut best_cost = (true, f64::INFINITY);
             for b in 0..MAX_BOXES {
-                let d = fabs(0.5 * (self.s_lo[step][b] + self.s_hi[step][b]) - mid);
-                if d < best_d {
-                    best_d = d;
+                let (b_s_lo, b_s_hi) = (self.s_lo[step][b], self.s_hi[step][b]);
+                let (b_l_lo, b_l_hi) = (self.l_lo[step][b], self.l_hi[step][b]);
+                let merged =
+                    (b_s_hi.max(s_hi) - b_s_lo.min(s_lo)) * (b_l_hi.max(l_hi) - b_l_lo.min(l_lo));
+                let growth = merged - (b_s_hi - b_s_lo) * (b_l_hi - b_l_lo);
+                let cost = (self.margin[step][b] != margin, growth);
+                if cost < best_cost {
+                    best_cost = cost;
                     best = b;
                 }
             }
@@ -291,6 +305,10 @@ pub struct Forecast {
     /// Its passage of the conflict zone, distances [enter, exit] along its lane from where it
     /// is, m.
     pub pass_m: [f64; 2],
+    /// The ego's passage of the same zone, distances [enter, exit] of its centre along its lane
+    /// from where it is, m: the margins apply there (a post-encroachment time is measured in
+    /// the conflict zone, not beside it).
+    pub ego_pass_m: [f64; 2],
 }
 
 impl Default for Forecast {
@@ -300,6 +318,7 @@ impl Default for Forecast {
             stop_in_m: f64::INFINITY,
             pet_s: [0.0; 2],
             pass_m: [f64::INFINITY; 2],
+            ego_pass_m: [f64::NEG_INFINITY, f64::INFINITY],
         }
     }
 }
@@ -712,8 +731,8 @@ impl Planner {
             }
             // Margins: the in-passage boxes in chunks of consecutive steps (the union of a
             // whole window would cover far more than the crossing where the agent's path is
-            // curved in the ego's frame); each step gets every chunk that overlaps its window
-            // [step, step + behind + ahead].
+            // curved in the ego's frame), cut to the ego's passage; each step gets every chunk
+            // that overlaps its window [step, step + behind + ahead].
             let mut k = 0;
             while k < total {
                 if self.sweep[k].is_none() {
@@ -736,9 +755,16 @@ impl Planner {
                     k += 1;
                 }
                 let last = k - 1;
+                let (s_lo, s_hi) = (
+                    u[0].max(self.start.s + f.ego_pass_m[0]),
+                    u[1].min(self.start.s + f.ego_pass_m[1]),
+                );
+                if s_lo > s_hi {
+                    continue;
+                }
                 let steps = first.saturating_sub(behind + ahead)..=last.min(self.steps - 1);
                 for step in steps {
-                    self.occupancy.add(step, u[0], u[1], u[2], u[3], true);
+                    self.occupancy.add(step, s_lo, s_hi, u[2], u[3], true);
                 }
             }
         }
@@ -780,9 +806,17 @@ impl Planner {
                     nominal.target_speed * (1.0 + p.sigma_rel * zv),
                 )
             };
-            self.end_t[k] =
-                (duration * (1.0 + p.sigma_rel * zt)).clamp(p.min_duration_s, p.max_duration_s);
             self.end_v[k] = target.clamp(0.0, v_top);
+            // Slowing from a braking start, the quartic's speed stays between its ends only for
+            // T ≤ 3 (v₀ − v_T) / |a₀|; longer ones undershoot, below zero near a stop.
+            let monotone = if self.start.dds < 0.0 && self.end_v[k] < v0 {
+                (3.0 * (v0 - self.end_v[k]) / -self.start.dds).max(p.min_duration_s)
+            } else {
+                p.max_duration_s
+            };
+            self.end_t[k] = (duration * (1.0 + p.sigma_rel * zt))
+                .clamp(p.min_duration_s, p.max_duration_s)
+                .min(monotone);
             // Below the low-speed threshold, at either end, the offset is held: a time-based
             // lateral polynomial would need unbounded path curvature near standstill.
             self.end_l[k] = if low_speed || self.end_v[k] < p.low_speed_mps {
@@ -969,12 +1003,18 @@ impl Planner {
             v_end
         };
         // A yielding candidate must stop at or before the yield point, or end the horizon
-        // through what it yields to, or still able to stop before the yield point (a quartic
-        // stop peaks at 1.5 × its mean deceleration); otherwise the next car could find it
-        // inside.
+        // through what it yields to, or still be able to stop before the yield point at the
+        // yield check time (a quartic stop peaks at 1.5 × its mean deceleration); otherwise
+        // the next car could find it inside.
         if self.yielding && prev_s < st.s + self.clear_distance {
+            let t_check = p.yield_check_s.min(horizon);
+            let (s_check, v_check) = if t_check <= t_end {
+                (q.pos(t_check), q.vel(t_check))
+            } else {
+                (s_end + v_end * (t_check - t_end), v_end)
+            };
             let stops_at = if v_end > 0.0 {
-                prev_s + v_last * v_last / (2.0 * p.max_brake_mps2 / 1.5)
+                s_check + v_check * v_check / (2.0 * p.max_brake_mps2 / 1.5)
             } else {
                 s_end
             };

@@ -513,15 +513,16 @@ fn decelerating_behind_a_car_that_will_have_passed_rolls_on_instead_of_stopping(
 #[test]
 fn a_rolling_decelerate_candidate_can_always_still_stop_before_the_zone() {
     // The HDV arrives at the crossing when the CAV would at its speed: the CAV must not commit.
+    // Replanned every cycle, it must still be able to stop at the yield check time.
     let p = Params::default().trajectory;
     let (core, best, yield_distance) = decelerate_towards_the_crossing(30.0);
     let start = core.planner().start;
-    let horizon = p.horizon_s;
-    let (s_h, v_h) = if horizon <= best.duration {
-        (best.s.pos(horizon), best.s.vel(horizon))
+    let (check, horizon) = (p.yield_check_s, p.horizon_s);
+    let (s_h, v_h) = if check <= best.duration {
+        (best.s.pos(check), best.s.vel(check))
     } else {
         let v = best.s.vel(best.duration);
-        (best.s.pos(best.duration) + v * (horizon - best.duration), v)
+        (best.s.pos(best.duration) + v * (check - best.duration), v)
     };
     let stopping = v_h * v_h / (2.0 * p.max_brake_mps2 / 1.5);
     assert!(
@@ -529,6 +530,43 @@ fn a_rolling_decelerate_candidate_can_always_still_stop_before_the_zone() {
         "commits to the crossing: s {s_h:.1}, v {v_h:.1}, stop at {:.1}",
         start.s + yield_distance
     );
+    // Not only the best: no feasible yielding candidate over a grid of terminal states that
+    // has not cleared the zone at the horizon is past stopping at the check time.
+    let profile = core.choice().profiles[Maneuver::Decelerate.index()];
+    let mut planner = *core.planner();
+    planner.sample(&profile, p.samples, 1, &p);
+    let mut feasible = 0;
+    for i in 0..=20 {
+        for j in 0..=24 {
+            let (t_end, v_end) = (1.0 + 0.25 * i as f64, 0.5 * j as f64);
+            let Ok(c) = planner.evaluate(t_end, v_end, 0.0, &p) else {
+                continue;
+            };
+            feasible += 1;
+            let at = |t: f64| {
+                if t <= t_end {
+                    (c.s.pos(t), c.s.vel(t))
+                } else {
+                    (c.s.pos(t_end) + v_end * (t - t_end), v_end)
+                }
+            };
+            if at(horizon).0 >= start.s + planner.clear_distance {
+                continue;
+            }
+            let (s_c, v_c) = at(check);
+            let stop_at = if v_end > 0.0 {
+                s_c + v_c * v_c / (2.0 * p.max_brake_mps2 / 1.5)
+            } else {
+                c.s.pos(t_end)
+            };
+            assert!(
+                stop_at <= start.s + yield_distance + 1e-6,
+                "T {t_end}, v_T {v_end}: stops at {stop_at:.1}, past {:.1}",
+                start.s + yield_distance
+            );
+        }
+    }
+    assert!(feasible > 0, "no feasible candidate on the grid");
 }
 
 #[test]

@@ -342,7 +342,7 @@ fn choose_with(pairs: &[ConflictPair], yields: &[f64], speed: f64) -> ChoiceOutc
         max_brake: p.trajectory.max_brake_mps2,
         min_duration: p.trajectory.min_duration_s,
         max_duration: p.trajectory.max_duration_s,
-        plan_horizon_s: p.trajectory.horizon_s,
+        yield_check_s: p.trajectory.yield_check_s,
         ..EgoContext::default()
     };
     let mut out = ChoiceOutcome::default();
@@ -377,7 +377,7 @@ fn yielding_to_a_car_that_waits_itself_costs_the_deadlock_wait() {
         goal_distance: 20.0,
         min_duration: 1.0,
         max_duration: 6.0,
-        plan_horizon_s: 5.0,
+        yield_check_s: 1.0,
         ..EgoContext::default()
     };
     let stop = Profile {
