@@ -58,6 +58,12 @@ use scene::{
 };
 use trajectory::{Candidate, Forecast, FrenetState, PlanStats, Planner};
 
+/// Conflict points closer than this are one point for queueing, m.
+const QUEUE_POINT_M: f64 = 0.5;
+/// A road user more than this further from a shared conflict point than another is queued
+/// behind it, m (less than a car length: they cannot be side by side in one lane).
+const QUEUE_GAP_M: f64 = 4.0;
+
 coded_enum! {
 /// Which path produced a decision.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -452,7 +458,8 @@ impl DecisionCore {
     /// Expectations about every conflicting road user: the probability that it lets the ego
     /// go first, and the planner's forecast of its motion. It counts as yielding for sure
     /// when it kept waiting after the ego announced it goes first, or when the ego has the
-    /// right of way and it can still stop comfortably; otherwise its implicit intent says.
+    /// right of way and it can still stop comfortably; otherwise its implicit intent says. One
+    /// queued behind another at the same conflict point yields at least as surely as that one.
     /// The planner forecasts a stop before its zone when it yields with at least
     /// `trust_yield` and needs no more than `max_imposed_decel_mps2` for it (courtesy: the
     /// ego does not count on harder braking); otherwise it drives on at the acceleration its
@@ -465,16 +472,38 @@ impl DecisionCore {
                 ..Forecast::default()
             };
         }
-        for (k, c) in self.conflicts.pairs().iter().enumerate() {
+        let pairs = self.conflicts.pairs();
+        for (k, c) in pairs.iter().enumerate() {
             let id = agents[c.agent as usize].id;
-            let y = if self.negotiation.yielded(id)
+            self.yields[k] = if self.negotiation.yielded(id)
                 || (c.right_of_way == RightOfWay::A && !c.intent.committed)
             {
                 1.0
             } else {
                 c.intent.yielding
             };
-            self.yields[k] = y;
+        }
+        // A road user queued behind another at the same conflict point, both before the zone,
+        // cannot enter before the one ahead: it yields at least as surely.
+        for k in 0..pairs.len() {
+            let c = &pairs[k];
+            let ahead = pairs
+                .iter()
+                .enumerate()
+                .filter(|(_, m)| {
+                    m.agent != c.agent
+                        && m.point.minus(c.point).norm() < QUEUE_POINT_M
+                        && m.agent_zone_m[0] > 0.0
+                        && c.agent_dist_m - m.agent_dist_m > QUEUE_GAP_M
+                })
+                .map(|(j, _)| self.yields[j])
+                .fold(0.0, f64::max);
+            if c.agent_zone_m[0] > 0.0 {
+                self.yields[k] = self.yields[k].max(ahead);
+            }
+        }
+        for (k, c) in pairs.iter().enumerate() {
+            let y = self.yields[k];
             let f = &mut self.forecasts[c.agent as usize];
             f.accel = c.agent_accel_mps2;
             f.pet_s = [ip.pet_behind_s, ip.pet_go_s];

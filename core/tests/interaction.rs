@@ -649,3 +649,67 @@ fn the_fallback_clears_a_zone_rather_than_standing_in_it() {
     let end = out.points().last().unwrap();
     assert!(!planner.in_zone(end.s) || end.speed > 1.0, "{end:?}");
 }
+
+#[test]
+fn a_car_queued_behind_one_that_waits_for_the_ego_waits_too() {
+    // The deadlock of the test above with a second car standing 10 m behind the first: once
+    // the first counts as yielding, the one behind it cannot arrive first either, so the core
+    // goes (it stood for good when only the first one's intent counted).
+    let mut core = paper_core(Params::default());
+    let m = *core.morphology();
+    let c = m.conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT).unwrap();
+    let lane = m.lane(paper::CAV_LEFT);
+    let (cav, h_cav, _) = lane.pose_at(lane.stop_s - 1.5, 0);
+    let hdv_lane = m.lane(paper::HDV_STRAIGHT);
+    let (first, h, _) = hdv_lane.pose_at(c.zone_b[0] - 3.0, 0);
+    let (second, _, _) = hdv_lane.pose_at(c.zone_b[0] - 13.0, 0);
+    let mut went = false;
+    for k in 0..80 {
+        let t = k as f64 * 0.05;
+        let mut scene = Scene::new(t, AgentState::moving(0, cav, h_cav, 0.0), paper::CAV_LEFT);
+        scene.push(AgentState::moving(1, first, h, 0.0));
+        scene.push(AgentState::moving(2, second, h, 0.0));
+        let d = core.step(&scene, t, None).unwrap();
+        let pairs = core.conflicts().pairs();
+        let of = |id: u32| {
+            pairs
+                .iter()
+                .position(|p| scene.agents()[p.agent as usize].id == id)
+                .map(|k| core.yields()[k])
+        };
+        if let (Some(y1), Some(y2)) = (of(1), of(2)) {
+            assert!(y2 >= y1 - 1e-12, "behind {y2} < ahead {y1}");
+        }
+        went |= d.negotiation == Phase::Going && d.maneuver != Maneuver::Decelerate;
+    }
+    assert!(went, "the core never went");
+}
+
+#[test]
+fn a_moving_car_behind_a_waiting_one_counts_as_yielding_as_surely() {
+    // The first car stands before its zone; the second rolls up behind it at 4 m/s without
+    // braking (its own motion says "not yielding").
+    let mut core = paper_core(Params::default());
+    let m = *core.morphology();
+    let c = m.conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT).unwrap();
+    let lane = m.lane(paper::CAV_LEFT);
+    let (cav, h_cav, _) = lane.pose_at(lane.stop_s - 1.5, 0);
+    let hdv_lane = m.lane(paper::HDV_STRAIGHT);
+    let (first, h, _) = hdv_lane.pose_at(c.zone_b[0] - 3.0, 0);
+    let (second, _, _) = hdv_lane.pose_at(c.zone_b[0] - 25.0, 0);
+    let mut scene = Scene::new(0.0, AgentState::moving(0, cav, h_cav, 0.0), paper::CAV_LEFT);
+    scene.push(AgentState::moving(1, first, h, 0.0));
+    scene.push(AgentState::moving(2, second, h, 4.0));
+    core.step(&scene, 0.0, None).unwrap();
+    let pairs = core.conflicts().pairs();
+    let k = |id: u32| {
+        pairs
+            .iter()
+            .position(|p| scene.agents()[p.agent as usize].id == id)
+            .unwrap()
+    };
+    let (k1, k2) = (k(1), k(2));
+    assert!(pairs[k2].intent.yielding < 0.1, "{:?}", pairs[k2].intent);
+    assert!(core.yields()[k1] >= 0.5, "{:?}", core.yields());
+    assert_eq!(core.yields()[k2], core.yields()[k1]);
+}
