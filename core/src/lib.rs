@@ -385,18 +385,19 @@ impl DecisionCore {
         if executed.is_none() {
             // The logit choice, then "decelerate", then the others by corrected probability:
             // every executed plan passed the same limit, collision and margin checks.
-            let mut order = [
-                self.choice.choice,
-                Maneuver::Decelerate,
-                Maneuver::Accelerate,
-                Maneuver::KeepSpeed,
-                Maneuver::TurnLeft,
-                Maneuver::TurnRight,
-            ];
             let pc = self.choice.p_corrected;
-            order[2..].sort_unstable_by(|a, b| pc[b.index()].total_cmp(&pc[a.index()]));
-            for (k, m) in order.into_iter().enumerate() {
-                if order[..k].contains(&m) {
+            let mut by_probability = Maneuver::ALL;
+            by_probability.sort_unstable_by(|a, b| {
+                pc[b.index()]
+                    .total_cmp(&pc[a.index()])
+                    .then(a.index().cmp(&b.index()))
+            });
+            let mut tried = [false; choice::MANEUVERS];
+            let order = [self.choice.choice, Maneuver::Decelerate]
+                .into_iter()
+                .chain(by_probability);
+            for m in order {
+                if core::mem::replace(&mut tried[m.index()], true) {
                     continue;
                 }
                 // Reuse the advice's safety check when it planned this maneuver already.
@@ -485,8 +486,10 @@ impl DecisionCore {
         }
         // A road user queued behind another at the same conflict point, both before the zone,
         // cannot enter before the one ahead: it yields at least as surely.
-        for k in 0..pairs.len() {
-            let c = &pairs[k];
+        for (k, c) in pairs.iter().enumerate() {
+            if c.agent_zone_m[0] <= 0.0 {
+                continue;
+            }
             let ahead = pairs
                 .iter()
                 .enumerate()
@@ -498,9 +501,7 @@ impl DecisionCore {
                 })
                 .map(|(j, _)| self.yields[j])
                 .fold(0.0, f64::max);
-            if c.agent_zone_m[0] > 0.0 {
-                self.yields[k] = self.yields[k].max(ahead);
-            }
+            self.yields[k] = self.yields[k].max(ahead);
         }
         for (k, c) in pairs.iter().enumerate() {
             let y = self.yields[k];

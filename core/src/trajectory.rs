@@ -202,9 +202,10 @@ impl Occupancy {
         self.step_hi[..steps].fill(f64::NEG_INFINITY);
     }
 
-    /// Adds a box at `step` (`margin`: a post-encroachment margin, not a footprint); a box inside
-    /// another that blocks at least as much is dropped; when the step is full, it is merged into the box whose area grows least, one of its own kind if
-    /// there is one (a footprint merged with a margin stays a footprint).
+    /// Adds a box at `step` (`margin`: a post-encroachment margin, not a footprint). A box inside
+    /// another that blocks at least as much is dropped; when the step is full, it is merged
+    /// into the box whose area grows least, one of its own kind if there is one (a footprint
+    /// merged with a margin stays a footprint).
     fn add(&mut self, step: usize, s_lo: f64, s_hi: f64, l_lo: f64, l_hi: f64, margin: bool) {
         let k = self.n[step] as usize;
         let covered = (0..k).any(|b| {

@@ -459,14 +459,13 @@ fn crossing_scene(
 }
 
 /// The CAV 45 m before the crossing at 10 m/s (able to stop comfortably before the junction)
-/// and the HDV `hdv_before` m before it: the core after one step, the best "decelerate"
-/// candidate and the CAV's distance to its yield point.
+/// and the HDV `hdv_before` m before it: the planner sampled for "decelerate" after one step,
+/// and its best candidate.
 fn decelerate_towards_the_crossing(
     hdv_before: f64,
 ) -> (
-    concord_core::DecisionCore,
+    concord_core::trajectory::Planner,
     concord_core::trajectory::Candidate,
-    f64,
 ) {
     let p = Params::default();
     let mut core = paper_core(p);
@@ -480,7 +479,18 @@ fn decelerate_towards_the_crossing(
     let best = planner
         .run(p.trajectory.samples, &p.trajectory, &mut stats)
         .expect("a feasible decelerate candidate");
-    (core, best, planner.yield_distance)
+    (planner, best)
+}
+
+/// Arc length and speed of candidate `c` at time `t`, holding its terminal speed after its
+/// duration.
+fn along(c: &concord_core::trajectory::Candidate, t: f64) -> (f64, f64) {
+    if t <= c.duration {
+        (c.s.pos(t), c.s.vel(t))
+    } else {
+        let v = c.s.vel(c.duration);
+        (c.s.pos(c.duration) + v * (t - c.duration), v)
+    }
 }
 
 #[test]
@@ -515,26 +525,17 @@ fn a_rolling_decelerate_candidate_can_always_still_stop_before_the_zone() {
     // The HDV arrives at the crossing when the CAV would at its speed: the CAV must not commit.
     // Replanned every cycle, it must still be able to stop at the yield check time.
     let p = Params::default().trajectory;
-    let (core, best, yield_distance) = decelerate_towards_the_crossing(30.0);
-    let start = core.planner().start;
-    let (check, horizon) = (p.yield_check_s, p.horizon_s);
-    let (s_h, v_h) = if check <= best.duration {
-        (best.s.pos(check), best.s.vel(check))
-    } else {
-        let v = best.s.vel(best.duration);
-        (best.s.pos(best.duration) + v * (check - best.duration), v)
-    };
-    let stopping = v_h * v_h / (2.0 * p.max_brake_mps2 / 1.5);
+    let (planner, best) = decelerate_towards_the_crossing(30.0);
+    let start = planner.start;
+    let stop_limit = start.s + planner.yield_distance + 1e-6;
+    let stopping = |v: f64| v * v / (2.0 * p.max_brake_mps2 / 1.5);
+    let (s_h, v_h) = along(&best, p.yield_check_s);
     assert!(
-        s_h + stopping <= start.s + yield_distance + 1e-6,
-        "commits to the crossing: s {s_h:.1}, v {v_h:.1}, stop at {:.1}",
-        start.s + yield_distance
+        s_h + stopping(v_h) <= stop_limit,
+        "commits to the crossing: s {s_h:.1}, v {v_h:.1}, stop at {stop_limit:.1}"
     );
     // Not only the best: no feasible yielding candidate over a grid of terminal states that
     // has not cleared the zone at the horizon is past stopping at the check time.
-    let profile = core.choice().profiles[Maneuver::Decelerate.index()];
-    let mut planner = *core.planner();
-    planner.sample(&profile, p.samples, 1, &p);
     let mut feasible = 0;
     for i in 0..=20 {
         for j in 0..=24 {
@@ -543,26 +544,18 @@ fn a_rolling_decelerate_candidate_can_always_still_stop_before_the_zone() {
                 continue;
             };
             feasible += 1;
-            let at = |t: f64| {
-                if t <= t_end {
-                    (c.s.pos(t), c.s.vel(t))
-                } else {
-                    (c.s.pos(t_end) + v_end * (t - t_end), v_end)
-                }
-            };
-            if at(horizon).0 >= start.s + planner.clear_distance {
+            if along(&c, p.horizon_s).0 >= start.s + planner.clear_distance {
                 continue;
             }
-            let (s_c, v_c) = at(check);
+            let (s_c, v_c) = along(&c, p.yield_check_s);
             let stop_at = if v_end > 0.0 {
-                s_c + v_c * v_c / (2.0 * p.max_brake_mps2 / 1.5)
+                s_c + stopping(v_c)
             } else {
                 c.s.pos(t_end)
             };
             assert!(
-                stop_at <= start.s + yield_distance + 1e-6,
-                "T {t_end}, v_T {v_end}: stops at {stop_at:.1}, past {:.1}",
-                start.s + yield_distance
+                stop_at <= stop_limit,
+                "T {t_end}, v_T {v_end}: stops at {stop_at:.1}, past {stop_limit:.1}"
             );
         }
     }

@@ -592,26 +592,44 @@ fn a_deadlock_negotiation_ends_when_the_other_takes_the_way() {
     assert_eq!(n.phase, Phase::Idle);
 }
 
-#[test]
-fn the_core_announces_going_first_in_a_deadlock_and_then_goes() {
-    // The CAV and a minor-road car (with equal priority here) both standing before their
-    // zones: the core announces, watches and goes.
-    let mut params = Params::default();
-    params.interaction.trust_yield = 0.8;
-    let mut core = paper_core(params);
-    let m = *core.morphology();
-    let c = m.conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT).unwrap();
-    // The HDV (which has priority) stands 3 m before its zone, the CAV at its stop line.
+/// At time `t`, the paper's CAV standing 1.5 m before its stop line, an HDV (id 1) standing 3 m
+/// before its zone on the priority road, and, for each (m before the zone, speed) of `behind`,
+/// another car on that lane (ids 2, 3, ...).
+fn standoff(core: &DecisionCore, t: f64, behind: &[(f64, f64)]) -> Scene {
+    let m = core.morphology();
+    let zone = m
+        .conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT)
+        .unwrap()
+        .zone_b[0];
     let lane = m.lane(paper::CAV_LEFT);
     let (cav, h_cav, _) = lane.pose_at(lane.stop_s - 1.5, 0);
-    let (hdv, h_hdv, _) = m.lane(paper::HDV_STRAIGHT).pose_at(c.zone_b[0] - 3.0, 0);
+    let mut scene = Scene::new(t, AgentState::moving(0, cav, h_cav, 0.0), paper::CAV_LEFT);
+    let hdv_lane = m.lane(paper::HDV_STRAIGHT);
+    for (id, &(before, v)) in (1..).zip([(3.0, 0.0)].iter().chain(behind)) {
+        let (pos, h, _) = hdv_lane.pose_at(zone - before, 0);
+        scene.push(AgentState::moving(id, pos, h, v));
+    }
+    scene
+}
+
+/// Index of the conflict with the road user `id` of `scene`, after a step on it.
+fn conflict_of(core: &DecisionCore, scene: &Scene, id: u32) -> Option<usize> {
+    core.conflicts()
+        .pairs()
+        .iter()
+        .position(|p| scene.agents()[p.agent as usize].id == id)
+}
+
+#[test]
+fn the_core_announces_going_first_in_a_deadlock_and_then_goes() {
+    // The CAV and the HDV (which has priority) both standing before their zones: the core
+    // announces, watches and goes.
+    let mut core = paper_core(Params::default());
     let mut phases = Vec::new();
     let mut announced_then_went = false;
     for k in 0..60 {
         let t = k as f64 * 0.05;
-        let mut scene = Scene::new(t, AgentState::moving(0, cav, h_cav, 0.0), paper::CAV_LEFT);
-        scene.push(AgentState::moving(1, hdv, h_hdv, 0.0));
-        let d = core.step(&scene, t, None).unwrap();
+        let d = core.step(&standoff(&core, t, &[]), t, None).unwrap();
         phases.push(d.negotiation);
         if d.negotiation == Phase::Going && d.maneuver != Maneuver::Decelerate {
             announced_then_went = true;
@@ -656,27 +674,12 @@ fn a_car_queued_behind_one_that_waits_for_the_ego_waits_too() {
     // the first counts as yielding, the one behind it cannot arrive first either, so the core
     // goes (it stood for good when only the first one's intent counted).
     let mut core = paper_core(Params::default());
-    let m = *core.morphology();
-    let c = m.conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT).unwrap();
-    let lane = m.lane(paper::CAV_LEFT);
-    let (cav, h_cav, _) = lane.pose_at(lane.stop_s - 1.5, 0);
-    let hdv_lane = m.lane(paper::HDV_STRAIGHT);
-    let (first, h, _) = hdv_lane.pose_at(c.zone_b[0] - 3.0, 0);
-    let (second, _, _) = hdv_lane.pose_at(c.zone_b[0] - 13.0, 0);
     let mut went = false;
     for k in 0..80 {
         let t = k as f64 * 0.05;
-        let mut scene = Scene::new(t, AgentState::moving(0, cav, h_cav, 0.0), paper::CAV_LEFT);
-        scene.push(AgentState::moving(1, first, h, 0.0));
-        scene.push(AgentState::moving(2, second, h, 0.0));
+        let scene = standoff(&core, t, &[(13.0, 0.0)]);
         let d = core.step(&scene, t, None).unwrap();
-        let pairs = core.conflicts().pairs();
-        let of = |id: u32| {
-            pairs
-                .iter()
-                .position(|p| scene.agents()[p.agent as usize].id == id)
-                .map(|k| core.yields()[k])
-        };
+        let of = |id| conflict_of(&core, &scene, id).map(|k| core.yields()[k]);
         if let (Some(y1), Some(y2)) = (of(1), of(2)) {
             assert!(y2 >= y1 - 1e-12, "behind {y2} < ahead {y1}");
         }
@@ -690,26 +693,12 @@ fn a_moving_car_behind_a_waiting_one_counts_as_yielding_as_surely() {
     // The first car stands before its zone; the second rolls up behind it at 4 m/s without
     // braking (its own motion says "not yielding").
     let mut core = paper_core(Params::default());
-    let m = *core.morphology();
-    let c = m.conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT).unwrap();
-    let lane = m.lane(paper::CAV_LEFT);
-    let (cav, h_cav, _) = lane.pose_at(lane.stop_s - 1.5, 0);
-    let hdv_lane = m.lane(paper::HDV_STRAIGHT);
-    let (first, h, _) = hdv_lane.pose_at(c.zone_b[0] - 3.0, 0);
-    let (second, _, _) = hdv_lane.pose_at(c.zone_b[0] - 25.0, 0);
-    let mut scene = Scene::new(0.0, AgentState::moving(0, cav, h_cav, 0.0), paper::CAV_LEFT);
-    scene.push(AgentState::moving(1, first, h, 0.0));
-    scene.push(AgentState::moving(2, second, h, 4.0));
+    let scene = standoff(&core, 0.0, &[(25.0, 4.0)]);
     core.step(&scene, 0.0, None).unwrap();
-    let pairs = core.conflicts().pairs();
-    let k = |id: u32| {
-        pairs
-            .iter()
-            .position(|p| scene.agents()[p.agent as usize].id == id)
-            .unwrap()
-    };
-    let (k1, k2) = (k(1), k(2));
-    assert!(pairs[k2].intent.yielding < 0.1, "{:?}", pairs[k2].intent);
+    let k1 = conflict_of(&core, &scene, 1).unwrap();
+    let k2 = conflict_of(&core, &scene, 2).unwrap();
+    let second = core.conflicts().pairs()[k2].intent;
+    assert!(second.yielding < 0.1, "{second:?}");
     assert!(core.yields()[k1] >= 0.5, "{:?}", core.yields());
     assert_eq!(core.yields()[k2], core.yields()[k1]);
 }
