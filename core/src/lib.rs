@@ -370,7 +370,13 @@ impl DecisionCore {
                 first_look,
                 &p.advice,
                 |m| {
-                    let (best, stats) = plan(planner, &profiles[m.index()], cycle, &p);
+                    let (best, stats) = plan(
+                        planner,
+                        &profiles[m.index()],
+                        cycle,
+                        p.trajectory.samples,
+                        &p,
+                    );
                     planned = Some((m, best, stats));
                     best.is_some()
                 },
@@ -383,8 +389,9 @@ impl DecisionCore {
             executed = Some((m, best, stats));
         }
         if executed.is_none() {
-            // The logit choice, then "decelerate", then the others by corrected probability:
-            // every executed plan passed the same limit, collision and margin checks.
+            // The logit choice, then "decelerate", then the others by corrected probability
+            // with `fallback_samples`: every executed plan passed the same limit, collision
+            // and margin checks.
             let pc = self.choice.p_corrected;
             let mut by_probability = Maneuver::ALL;
             by_probability.sort_unstable_by(|a, b| {
@@ -392,12 +399,18 @@ impl DecisionCore {
                     .total_cmp(&pc[a.index()])
                     .then(a.index().cmp(&b.index()))
             });
+            // A maneuver whose profile equals one already tried draws the same samples and
+            // fails the same way: it is skipped.
             let mut tried = [false; choice::MANEUVERS];
             let order = [self.choice.choice, Maneuver::Decelerate]
                 .into_iter()
                 .chain(by_probability);
-            for m in order {
-                if core::mem::replace(&mut tried[m.index()], true) {
+            for (k, m) in order.enumerate() {
+                let profile = self.choice.profiles[m.index()];
+                let same = Maneuver::ALL
+                    .iter()
+                    .any(|o| tried[o.index()] && self.choice.profiles[o.index()] == profile);
+                if core::mem::replace(&mut tried[m.index()], true) || same {
                     continue;
                 }
                 // Reuse the advice's safety check when it planned this maneuver already.
@@ -405,8 +418,13 @@ impl DecisionCore {
                     Some((pm, best, stats)) if pm == m => (best, stats),
                     _ => plan(
                         &mut self.planner,
-                        &self.choice.profiles[m.index()],
+                        &profile,
                         self.cycle,
+                        if k < 2 {
+                            p.trajectory.samples
+                        } else {
+                            p.trajectory.later_samples()
+                        },
                         &p,
                     ),
                 };
@@ -423,7 +441,10 @@ impl DecisionCore {
                 decision.plan = stats;
                 self.planner.render(&best, &lane, &mut decision.trajectory);
             }
-            None => self.minimum_risk(ctx.yield_distance, &lane, &mut decision),
+            None => {
+                let stop = ctx.yield_distance.min(self.leader_stop_distance());
+                self.minimum_risk(stop, &lane, &mut decision)
+            }
         }
         decision.announce = if self.negotiation.announces() || !decision.maneuver.gives_way() {
             Announcement::GoingFirst
@@ -434,6 +455,17 @@ impl DecisionCore {
             .record(scene.time_s, self.choice.state, decision.maneuver);
         self.last = decision;
         Ok(decision)
+    }
+
+    /// Distance, m, within which the ego must stop behind its car-following leader should the
+    /// leader brake at `emergency_brake_mps2` from now: the centre gap less a car length and
+    /// `stop_margin_m`, plus the leader's own stopping distance (∞ without a leader).
+    fn leader_stop_distance(&self) -> f64 {
+        let t = &self.params.trajectory;
+        self.triplet.leader.map_or(f64::INFINITY, |l| {
+            l.gap_m - t.vehicle_length_m - t.stop_margin_m
+                + l.speed_mps * l.speed_mps / (2.0 * t.emergency_brake_mps2)
+        })
     }
 
     /// The minimum-risk fallback into `decision` ([`Planner::fallback`]), driving on, if at
@@ -459,7 +491,8 @@ impl DecisionCore {
     /// Expectations about every conflicting road user: the probability that it lets the ego
     /// go first, and the planner's forecast of its motion. It counts as yielding for sure
     /// when it kept waiting after the ego announced it goes first, or when the ego has the
-    /// right of way and it can still stop comfortably; otherwise its implicit intent says. One
+    /// right of way and it can still stop comfortably; otherwise its implicit intent says,
+    /// weighted by `priority_yield_weight` when it has the right of way over the ego. One
     /// queued behind another at the same conflict point yields at least as surely as that one.
     /// The planner forecasts a stop before its zone when it yields with at least
     /// `trust_yield` and needs no more than `max_imposed_decel_mps2` for it (courtesy: the
@@ -480,6 +513,8 @@ impl DecisionCore {
                 || (c.right_of_way == RightOfWay::A && !c.intent.committed)
             {
                 1.0
+            } else if c.right_of_way == RightOfWay::B {
+                c.intent.yielding * ip.priority_yield_weight
             } else {
                 c.intent.yielding
             };
@@ -677,14 +712,14 @@ impl DecisionCore {
     }
 }
 
-/// Samples around `profile` and runs the Monte Carlo search.
+/// Samples `n` candidates around `profile` and runs the Monte Carlo search.
 fn plan(
     planner: &mut Planner,
     profile: &Profile,
     cycle: u64,
+    n: usize,
     p: &Params,
 ) -> (Option<Candidate>, PlanStats) {
-    let n = p.trajectory.samples;
     planner.sample(profile, n, cycle, &p.trajectory);
     let mut stats = PlanStats::default();
     let best = planner.run(n, &p.trajectory, &mut stats);

@@ -192,6 +192,12 @@ pub struct InteractionParams {
     /// Yield probability from which the planner predicts a road user stopping before its zone
     /// instead of driving on.
     pub trust_yield: f64,
+    /// Weight in [0, 1] of the implicit yield evidence of a road user with the right of way
+    /// over the ego: its yield probability from motion and words is scaled by it. 1 reads its
+    /// motion as anyone's; 0 never expects it to give up its right of way unless it kept
+    /// waiting after the ego announced it goes first (traffic that never yields to a car
+    /// without priority, and brakes only for others).
+    pub priority_yield_weight: f64,
     /// Waiting for a road user that itself waits is expected to last this long, s (the cost
     /// of a deadlock in the efficiency degree).
     pub deadlock_wait_s: f64,
@@ -222,6 +228,7 @@ impl Default for InteractionParams {
             max_imposed_decel_mps2: 3.0,
             reaction_s: 0.5,
             trust_yield: 0.8,
+            priority_yield_weight: 1.0,
             deadlock_wait_s: 5.0,
             creep_speed_mps: 1.0,
             deadlock_after_s: 0.5,
@@ -259,6 +266,11 @@ impl Default for AdviceParams {
 pub struct TrajectoryParams {
     /// N_samples, at most `MAX_SAMPLES`.
     pub samples: usize,
+    /// Samples of the later plans of a cycle, at least 1 (at most `samples` are used): the
+    /// maneuvers tried after the logit choice and "decelerate" have failed, and the
+    /// minimum-risk fallback's search for a drive-on candidate. Bounds a cycle that ends in
+    /// the fallback to about two full plans and five small ones.
+    pub fallback_samples: usize,
     /// RNG seed; each cycle uses seed ⊕ cycle, so runs replay exactly.
     pub seed: u64,
     /// Planning and collision-check horizon, s.
@@ -320,10 +332,18 @@ pub struct TrajectoryParams {
     pub yield_check_s: f64,
 }
 
+impl TrajectoryParams {
+    /// Samples of a cycle's later plans: `fallback_samples`, at most `samples`.
+    pub fn later_samples(&self) -> usize {
+        self.fallback_samples.min(self.samples)
+    }
+}
+
 impl Default for TrajectoryParams {
     fn default() -> Self {
         Self {
             samples: 1024,
+            fallback_samples: 256,
             seed: 0x5EED_C0C0,
             horizon_s: 5.0,
             dt_s: 0.1,
@@ -402,6 +422,9 @@ impl Params {
         if t.samples == 0 || t.samples > MAX_SAMPLES {
             return bad("trajectory.samples", "must be in 1..=1024");
         }
+        if t.fallback_samples == 0 || t.fallback_samples > MAX_SAMPLES {
+            return bad("trajectory.fallback_samples", "must be in 1..=1024");
+        }
         if t.dt_s <= 0.0 || t.horizon_s <= 0.0 || t.horizon_s / t.dt_s > MAX_STEPS as f64 + 1e-6 {
             return bad("trajectory.horizon_s", "horizon_s / dt_s must be in 1..=64");
         }
@@ -433,6 +456,9 @@ impl Params {
             || self.advice.freshness_cycles as usize > crate::advice::MAX_PENDING
         {
             return bad("advice.freshness_cycles", "must be in 1..=256");
+        }
+        if !(0.0..=1.0).contains(&self.interaction.priority_yield_weight) {
+            return bad("interaction.priority_yield_weight", "must be in [0, 1]");
         }
         if t.max_brake_mps2 <= 0.0 || t.emergency_brake_mps2 < t.max_brake_mps2 {
             return bad(

@@ -1164,8 +1164,11 @@ impl Planner {
     /// `drive_on` (profiles that hold or gain speed) that postpones the first predicted
     /// contact longest is taken instead, if it does (it leaves the others the most time to
     /// react); when braking would end standing inside a conflict zone, one free of predicted
-    /// contact is taken: the ego clears the zone. Returns the index of the profile taken
-    /// (`None`: braking).
+    /// contact is taken: the ego clears the zone. Past its stop line and before the end of the
+    /// last conflict zone, inside the junction, a braking that is predicted to be hit leaves
+    /// the ego standing in the other's path: any feasible drive-on candidate is taken instead,
+    /// the one with the latest contact. Drive-on candidates are searched with
+    /// `fallback_samples`. Returns the index of the profile taken (`None`: braking).
     pub fn fallback(
         &mut self,
         stop_distance: f64,
@@ -1181,12 +1184,17 @@ impl Planner {
         if contact.is_none() && !stands_in_zone {
             return None;
         }
+        let in_junction = self.start.s > lane.stop_s
+            && self.zones[..self.n_zones]
+                .iter()
+                .any(|z| self.start.s < z[1]);
+        let clear_out = contact.is_some() && in_junction;
         let mut latest = contact.unwrap_or(f64::INFINITY);
         let mut taken = None;
         for (k, profile) in drive_on.iter().enumerate() {
-            self.sample(profile, p.samples, cycle, p);
-            if let Some((c, t)) = self.latest_contact(p.samples, p) {
-                let clears = stands_in_zone && t.is_infinite();
+            self.sample(profile, p.later_samples(), cycle, p);
+            if let Some((c, t)) = self.latest_contact(p.later_samples(), p) {
+                let clears = clear_out || (stands_in_zone && t.is_infinite());
                 if t > latest || (clears && taken.is_none()) {
                     latest = t;
                     taken = Some(k);
@@ -1198,8 +1206,9 @@ impl Planner {
     }
 
     /// Minimum-risk fallback: brake along the lane at constant deceleration, enough to stop
-    /// `stop_distance` m ahead (before the conflict zone) but at least `max_brake` and at most
-    /// `emergency_brake`; with nothing to stop for, brake at `max_brake`.
+    /// `stop_distance` m ahead (before the conflict zone, behind the leader) but at least
+    /// `max_brake` and at most `emergency_brake`; with nothing to stop for (∞), or already
+    /// past it, brake at `emergency_brake`.
     pub fn minimum_risk(
         &self,
         stop_distance: f64,

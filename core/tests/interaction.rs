@@ -702,3 +702,61 @@ fn a_moving_car_behind_a_waiting_one_counts_as_yielding_as_surely() {
     assert!(core.yields()[k1] >= 0.5, "{:?}", core.yields());
     assert_eq!(core.yields()[k2], core.yields()[k1]);
 }
+
+#[test]
+fn a_road_user_with_priority_is_expected_to_yield_only_as_far_as_its_weight_says() {
+    // The HDV (priority road) stands before its zone: its motion says "yielding". With
+    // `priority_yield_weight` 0 the core never counts on it (before announcing anything).
+    let expected = |weight: f64| {
+        let mut p = Params::default();
+        p.interaction.priority_yield_weight = weight;
+        let mut core = paper_core(p);
+        let scene = standoff(&core, 0.0, &[]);
+        core.step(&scene, 0.0, None).unwrap();
+        let k = conflict_of(&core, &scene, 1).unwrap();
+        let pair = core.conflicts().pairs()[k];
+        assert_eq!(pair.right_of_way, RightOfWay::B);
+        (pair.intent.yielding, core.yields()[k])
+    };
+    let (implicit, full) = expected(1.0);
+    assert!(implicit >= 0.5 && full == implicit, "{implicit} {full}");
+    assert_eq!(expected(0.5).1, 0.5 * implicit);
+    assert_eq!(expected(0.0).1, 0.0);
+    let mut p = Params::default();
+    p.interaction.priority_yield_weight = 1.5;
+    assert_eq!(
+        p.validate().unwrap_err().key,
+        "interaction.priority_yield_weight"
+    );
+}
+
+#[test]
+fn the_minimum_risk_stop_ends_behind_a_standing_leader() {
+    // The CAV at 10 m/s, 14 m (centre to centre) behind a car standing in its lane, an HDV on
+    // the priority road ahead of the junction: stopping behind the car takes 6.1 m/s², more
+    // than any candidate may brake, and more than stopping at the yield point would take.
+    let p = Params::default();
+    let mut core = paper_core(p);
+    let m = *core.morphology();
+    let lane = *m.lane(paper::CAV_LEFT);
+    let (ego, h, _) = lane.pose_at(5.0, 0);
+    let (leader, hl, _) = lane.pose_at(19.0, 0);
+    let mut scene = Scene::new(0.0, AgentState::moving(0, ego, h, 10.0), paper::CAV_LEFT);
+    scene.push(AgentState::moving(1, leader, hl, 0.0));
+    let zone = m
+        .conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT)
+        .unwrap()
+        .zone_b[0];
+    let (hdv, hh, _) = m.lane(paper::HDV_STRAIGHT).pose_at(zone - 20.0, 0);
+    scene.push(AgentState::moving(2, hdv, hh, 8.0));
+    let d = core.step(&scene, 0.0, None).unwrap();
+    assert_eq!(d.source, concord_core::DecisionSource::MinimumRisk);
+    assert!(
+        core.planner().yield_distance > 10.0,
+        "{}",
+        core.planner().yield_distance
+    );
+    let end = d.trajectory.points().last().unwrap();
+    assert!(end.speed < 1e-9, "{end:?}");
+    assert!(end.s <= 19.0 - p.trajectory.vehicle_length_m, "{end:?}");
+}
