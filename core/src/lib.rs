@@ -407,12 +407,13 @@ impl DecisionCore {
                 .chain(by_probability);
             for (k, m) in order.enumerate() {
                 let profile = self.choice.profiles[m.index()];
-                let same = Maneuver::ALL
+                if Maneuver::ALL
                     .iter()
-                    .any(|o| tried[o.index()] && self.choice.profiles[o.index()] == profile);
-                if core::mem::replace(&mut tried[m.index()], true) || same {
+                    .any(|o| tried[o.index()] && self.choice.profiles[o.index()] == profile)
+                {
                     continue;
                 }
+                tried[m.index()] = true;
                 // Reuse the advice's safety check when it planned this maneuver already.
                 let (best, stats) = match planned {
                     Some((pm, best, stats)) if pm == m => (best, stats),
