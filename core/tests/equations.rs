@@ -804,3 +804,16 @@ fn eq12_to_15_the_choice_follows_its_history_when_utilities_tie() {
         );
     }
 }
+
+#[test]
+fn fallback_samples_must_be_a_usable_count_and_later_plans_use_at_most_samples() {
+    let mut p = Params::default();
+    p.trajectory.fallback_samples = 0;
+    assert_eq!(p.validate().unwrap_err().key, "trajectory.fallback_samples");
+    p.trajectory.fallback_samples = 1025;
+    assert_eq!(p.validate().unwrap_err().key, "trajectory.fallback_samples");
+    p.trajectory.fallback_samples = 512;
+    p.trajectory.samples = 128;
+    assert!(p.validate().is_ok());
+    assert_eq!(p.trajectory.later_samples(), 128);
+}
