@@ -168,7 +168,7 @@ enum Command {
         #[arg(long, default_value_t = 8.0)]
         speed: f64,
         /// Time limit, s.
-        #[arg(long, default_value_t = 30.0)]
+        #[arg(long, default_value_t = 30.0, value_parser = seconds)]
         duration: f64,
     },
     /// Run the onboard core process.
@@ -180,13 +180,13 @@ enum Command {
         #[arg(long)]
         prefix: Option<String>,
         /// Loop rate, Hz, overriding the file's.
-        #[arg(long)]
+        #[arg(long, value_parser = hertz)]
         rate: Option<f64>,
         /// Road geometry, overriding the file's `service.geometry`.
         #[arg(long, value_enum)]
         geometry: Option<GeometryArg>,
         /// Stop after this many seconds (default: run until SIGINT/SIGTERM).
-        #[arg(long)]
+        #[arg(long, value_parser = seconds)]
         duration: Option<f64>,
     },
     /// Publish synthetic scenes.
@@ -194,7 +194,7 @@ enum Command {
         #[arg(long, value_enum, default_value_t = ScenarioArg::Paper)]
         scenario: ScenarioArg,
         /// Frame rate, Hz.
-        #[arg(long, default_value_t = 20.0)]
+        #[arg(long, default_value_t = 20.0, value_parser = hertz)]
         rate: f64,
         /// Initial speed of the ego and the HDV, m/s.
         #[arg(long, default_value_t = 8.0)]
@@ -205,7 +205,7 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         seed: u64,
         /// Stop after this many seconds (default: when the scenario ends).
-        #[arg(long)]
+        #[arg(long, value_parser = seconds)]
         duration: Option<f64>,
         /// Start the scenario over when it ends.
         #[arg(long)]
@@ -227,10 +227,10 @@ enum Command {
         #[arg(long, default_value = services::DEFAULT_PREFIX)]
         prefix: String,
         /// Refresh period, s.
-        #[arg(long, default_value_t = 1.0)]
+        #[arg(long, default_value_t = 1.0, value_parser = seconds)]
         period: f64,
         /// Stop after this many seconds.
-        #[arg(long)]
+        #[arg(long, value_parser = seconds)]
         duration: Option<f64>,
     },
     /// Print the default configuration as TOML, or check a configuration file.
@@ -262,6 +262,29 @@ enum Command {
         #[command(subcommand)]
         which: ExperimentArg,
     },
+}
+
+/// Longest duration or period accepted on the command line, s (30 days).
+const MAX_SECONDS: f64 = 30.0 * 86_400.0;
+
+/// A duration or period on the command line, s: a number in (0, 30 days].
+fn seconds(arg: &str) -> Result<f64, String> {
+    let v: f64 = arg.parse().map_err(|e| format!("{e}"))?;
+    if v > 0.0 && v <= MAX_SECONDS {
+        Ok(v)
+    } else {
+        Err(format!("expected seconds in (0, {MAX_SECONDS}]"))
+    }
+}
+
+/// A rate on the command line, Hz: a number in [0.5, 1000].
+fn hertz(arg: &str) -> Result<f64, String> {
+    let v: f64 = arg.parse().map_err(|e| format!("{e}"))?;
+    if (0.5..=1000.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err("expected 0.5 to 1000 Hz".into())
+    }
 }
 
 fn main() -> ExitCode {
@@ -300,9 +323,6 @@ fn main() -> ExitCode {
                 .iter()
                 .map(|f| Fault::parse(f).ok_or_else(|| format!("--faults: unknown fault {f:?} (nan, jump, stall, duplicate, reorder, restart)")))
                 .collect::<Result<Vec<_>, _>>()?;
-            if !(rate.is_finite() && rate > 0.0 && rate <= 1000.0) {
-                return Err(format!("--rate {rate}: expected 0 to 1000 Hz"));
-            }
             let cfg = FeedConfig {
                 prefix,
                 rate_hz: rate,

@@ -42,10 +42,6 @@ echo "$demo"
 grep -q "^outcome: turn completed" <<<"$demo"
 grep -q "^sidecar: requests" <<<"$demo"
 
-step "the core is no_std without alloc"
-grep -q '^#!\[no_std\]' core/src/lib.rs
-if grep -rn 'extern crate alloc\|extern crate std' core/src; then exit 1; fi
-
 echo
 echo "all checks passed"
 echo "tests: $passed passed, $failed failed"

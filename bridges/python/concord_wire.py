@@ -28,9 +28,10 @@ DEFAULT_PREFIX = "concord/"
 MANEUVERS = ("accelerate", "decelerate", "keep_speed", "turn_left", "turn_right")
 # DecisionSource, FallbackReason and AdviceVerdict codes.
 SOURCES = ("logit", "advice", "minimum_risk")
-FALLBACKS = ("none", "no_feasible_trajectory", "stale_scene")
+FALLBACKS = ("none", "no_feasible_trajectory", "stale_scene", "not_finite")
 ADVICE_VERDICTS = ("no_advice", "accepted", "malformed", "unknown_request",
-                   "low_confidence", "late", "navigation_inconsistent", "unsafe", "expired")
+                   "low_confidence", "late", "navigation_inconsistent", "unsafe", "expired",
+                   "implausible")
 # Announcement and negotiation Phase codes of a decision.
 ANNOUNCEMENTS = ("giving_way", "going_first")
 NEGOTIATION_PHASES = ("idle", "waiting", "announced", "going")
@@ -225,7 +226,7 @@ class WireAdvice(_Wire):
     _type_name = "ConcordAdvice"
     _fields_ = [
         ("request_id", ctypes.c_uint64),
-        ("created_ns", ctypes.c_uint64),
+        ("published_ns", ctypes.c_uint64),
         ("confidence", ctypes.c_double),
         ("ego_intent", WireIntent),
         ("agent_intents", WireAgentIntent * WIRE_OBJECTS),
@@ -279,10 +280,10 @@ class CoreStats(_Wire):
         ("frames_rejected", ctypes.c_uint64 * 5),
         ("publisher_restarts", ctypes.c_uint64),
         ("decisions", ctypes.c_uint64 * 3),
-        ("fallbacks", ctypes.c_uint64 * 3),
+        ("fallbacks", ctypes.c_uint64 * 4),
         ("advice_requests", ctypes.c_uint64),
         ("advice_received", ctypes.c_uint64),
-        ("advice_verdicts", ctypes.c_uint64 * 9),
+        ("advice_verdicts", ctypes.c_uint64 * 10),
         ("advice_failures", ctypes.c_uint64 * 5),
         ("courtesy_rejects", ctypes.c_uint64),
         ("deadlock_announcements", ctypes.c_uint64),

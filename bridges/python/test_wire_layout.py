@@ -1,4 +1,5 @@
-"""The ctypes mirror matches the Rust wire types: size, alignment, type name, field offsets.
+"""The ctypes mirror matches the Rust wire types: size, alignment, type name, field offsets and
+field types.
 
 Runs `cargo run -p concord-ipc --example wire_layout` for the Rust side, or reads the JSON it
 prints from $CONCORD_WIRE_LAYOUT.
@@ -14,6 +15,27 @@ import concord_wire as wire
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
+
+# ctypes scalars in Rust's notation (c_ubyte is c_uint8, c_byte is c_int8).
+SCALARS = {
+    ctypes.c_double: "f64", ctypes.c_float: "f32",
+    ctypes.c_uint64: "u64", ctypes.c_int64: "i64",
+    ctypes.c_uint32: "u32", ctypes.c_int32: "i32",
+    ctypes.c_uint16: "u16", ctypes.c_int16: "i16",
+    ctypes.c_uint8: "u8", ctypes.c_int8: "i8",
+    ctypes.c_bool: "bool",
+}
+
+
+def rust_type(ctype):
+    """A ctypes field type as Rust prints it: `f64`, `[u8; 7]`, `WireAgent`."""
+    if ctype in SCALARS:
+        return SCALARS[ctype]
+    if issubclass(ctype, ctypes.Array):
+        return f"[{rust_type(ctype._type_)}; {ctype._length_}]"
+    if issubclass(ctype, ctypes.Structure):
+        return ctype.__name__
+    raise TypeError(f"no Rust notation for {ctype!r}")
 
 
 def rust_layout():
@@ -42,7 +64,17 @@ class WireLayout(unittest.TestCase):
                 self.assertEqual(ctypes.alignment(ty), r["align"], "alignment")
                 self.assertEqual(ty.type_name(), r["type_name"], "type name")
                 mirror = {name: getattr(ty, name).offset for name, _ in ty._fields_}
-                self.assertEqual(mirror, r["fields"], "field offsets")
+                rust = {name: f["offset"] for name, f in r["fields"].items()}
+                self.assertEqual(mirror, rust, "field offsets")
+
+    def test_field_types_match(self):
+        for ty in wire.ALL_TYPES:
+            rust = self.rust[ty.__name__]["fields"]
+            for name, ctype in ty._fields_:
+                with self.subTest(type=ty.__name__, field=name):
+                    self.assertIn(name, rust, f"{ty.__name__}.{name} is not a Rust field")
+                    self.assertEqual(rust_type(ctype), rust[name]["type"],
+                                     f"type of {ty.__name__}.{name}")
 
     def test_text_round_trip_cuts_at_a_character_boundary(self):
         m = wire.IntentText()

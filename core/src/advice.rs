@@ -1,18 +1,21 @@
 //! The gate on the LLM's recommendation A_final (eq. 16). Advice replaces the logit choice only
-//! when it answers a request issued in the last N cycles, its confidence is ≥ 0.7, it arrived
-//! before that request's deadline, and the maneuver passes the core's own navigation and
-//! safety checks. Otherwise the logit choice stands and the reason is recorded. Accepted
+//! when it answers a request issued in the last N cycles, its confidence is ≥ 0.7, it was
+//! published before that request's deadline, the corrected logit keeps the maneuver plausible
+//! (P_n ≥ `prune_below`: the advice refines the choice, it does not override it), and the
+//! maneuver passes the core's own navigation and safety checks. Otherwise the logit choice
+//! stands and the reason is recorded. The deadline is judged by the advice's publish stamp, so
+//! an answer published in time counts even when the core reads it at a later tick. Accepted
 //! advice applies until its request's deadline: after it, the same advice is refused as
 //! expired (it is still judged once when the first cycle to see it comes after the deadline).
 
-use crate::choice::Maneuver;
+use crate::choice::{Maneuver, MANEUVERS};
 use crate::params::AdviceParams;
 use crate::scene::Turn;
 
 /// Capacity of the request log; `freshness_cycles` may not exceed it.
 pub const MAX_PENDING: usize = 256;
 
-/// Advice as received from the sidecar, stamped with its arrival time by the host.
+/// Advice as received from the sidecar, with the sidecar's publish stamp.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Advice {
     /// The request it answers (the cycle number that issued it).
@@ -21,8 +24,8 @@ pub struct Advice {
     pub maneuver: Maneuver,
     /// Confidence in [0, 1].
     pub confidence: f64,
-    /// Arrival time on the core's clock, s.
-    pub received_at_s: f64,
+    /// When the sidecar published it, on the core's clock (`CLOCK_MONOTONIC`), s.
+    pub published_at_s: f64,
 }
 
 coded_enum! {
@@ -34,13 +37,15 @@ pub enum AdviceVerdict {
     NoAdvice = 0,
     /// Applied: the decision follows A_final.
     Accepted = 1,
-    /// Confidence or arrival time is not a finite number.
+    /// Confidence outside [0, 1], an unknown maneuver or intent code, an intent confidence
+    /// outside [0, 1], or a publish stamp that is not finite, lies in the future, or precedes
+    /// its request.
     Malformed = 2,
     /// Answers no request of the last N cycles (stale, or never issued).
     UnknownRequest = 3,
     /// Confidence below the threshold.
     LowConfidence = 4,
-    /// Arrived after the request's deadline.
+    /// Published after the request's deadline.
     Late = 5,
     /// A turn against the navigation instruction.
     NavigationInconsistent = 6,
@@ -48,12 +53,14 @@ pub enum AdviceVerdict {
     Unsafe = 7,
     /// Judged before, and its request's deadline has passed.
     Expired = 8,
+    /// The corrected logit gives the maneuver P_n below `prune_below`.
+    Implausible = 9,
 }
 }
 
 impl AdviceVerdict {
     /// Every verdict, by wire code.
-    pub const ALL: [AdviceVerdict; 9] = [
+    pub const ALL: [AdviceVerdict; 10] = [
         AdviceVerdict::NoAdvice,
         AdviceVerdict::Accepted,
         AdviceVerdict::Malformed,
@@ -63,6 +70,7 @@ impl AdviceVerdict {
         AdviceVerdict::NavigationInconsistent,
         AdviceVerdict::Unsafe,
         AdviceVerdict::Expired,
+        AdviceVerdict::Implausible,
     ];
     /// snake_case name.
     pub fn name(self) -> &'static str {
@@ -76,6 +84,7 @@ impl AdviceVerdict {
             AdviceVerdict::NavigationInconsistent => "navigation_inconsistent",
             AdviceVerdict::Unsafe => "unsafe",
             AdviceVerdict::Expired => "expired",
+            AdviceVerdict::Implausible => "implausible",
         }
     }
 }
@@ -111,40 +120,55 @@ impl RequestLog {
         }
         Some(self.issued_at_s[(id % MAX_PENDING as u64) as usize])
     }
-    /// Deadline of request `id`, if fresh: issue time + `deadline_s`.
-    pub fn deadline(&self, id: u64, p: &AdviceParams) -> Option<f64> {
-        self.issued_at(id, p.freshness_cycles)
-            .map(|t| t + p.deadline_s)
-    }
+}
+
+/// What the gate weighs the advice against this cycle.
+#[derive(Clone, Copy, Debug)]
+pub struct GateContext<'a> {
+    pub log: &'a RequestLog,
+    /// The navigation instruction.
+    pub route: Turn,
+    /// The core's clock, s.
+    pub now: f64,
+    /// True when no earlier cycle judged this advice.
+    pub first_look: bool,
+    /// The corrected logit's P_n (eq. 15), in `Maneuver` order.
+    pub p_corrected: &'a [f64; MANEUVERS],
 }
 
 /// Checks of eq. 16 that need no trajectory, in order; `Ok` means only the safety check remains.
-/// `now` is the core's clock, s; `first_look` is true when no earlier cycle judged this advice.
 pub fn pre_check(
     advice: &Advice,
-    log: &RequestLog,
-    route: Turn,
-    now: f64,
-    first_look: bool,
+    g: &GateContext,
     p: &AdviceParams,
 ) -> Result<Maneuver, AdviceVerdict> {
-    if !advice.confidence.is_finite() || !advice.received_at_s.is_finite() {
+    let published = advice.published_at_s;
+    if !(0.0..=1.0).contains(&advice.confidence) || !published.is_finite() || published > g.now {
         return Err(AdviceVerdict::Malformed);
     }
-    let deadline = log
-        .deadline(advice.request_id, p)
+    let issued = g
+        .log
+        .issued_at(advice.request_id, p.freshness_cycles)
         .ok_or(AdviceVerdict::UnknownRequest)?;
-    if now > deadline && !first_look {
+    if published < issued {
+        return Err(AdviceVerdict::Malformed);
+    }
+    let deadline = issued + p.deadline_s;
+    if g.now > deadline && !g.first_look {
         return Err(AdviceVerdict::Expired);
     }
     if advice.confidence < p.confidence_min {
         return Err(AdviceVerdict::LowConfidence);
     }
-    if advice.received_at_s > deadline {
+    if published > deadline {
         return Err(AdviceVerdict::Late);
     }
-    if !advice.maneuver.consistent_with(route) {
+    if !advice.maneuver.consistent_with(g.route) {
         return Err(AdviceVerdict::NavigationInconsistent);
+    }
+    let pn = g.p_corrected[advice.maneuver.index()];
+    if pn.is_nan() || pn < p.prune_below {
+        return Err(AdviceVerdict::Implausible);
     }
     Ok(advice.maneuver)
 }
@@ -152,17 +176,14 @@ pub fn pre_check(
 /// The whole gate: [`pre_check`], then `is_safe` (the core's feasibility and collision check).
 pub fn gate(
     advice: Option<&Advice>,
-    log: &RequestLog,
-    route: Turn,
-    now: f64,
-    first_look: bool,
+    g: &GateContext,
     p: &AdviceParams,
     is_safe: impl FnOnce(Maneuver) -> bool,
 ) -> (Option<Maneuver>, AdviceVerdict) {
     let Some(advice) = advice else {
         return (None, AdviceVerdict::NoAdvice);
     };
-    match pre_check(advice, log, route, now, first_look, p) {
+    match pre_check(advice, g, p) {
         Err(v) => (None, v),
         Ok(m) if is_safe(m) => (Some(m), AdviceVerdict::Accepted),
         Ok(_) => (None, AdviceVerdict::Unsafe),

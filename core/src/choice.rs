@@ -653,11 +653,12 @@ pub fn correct(
     v
 }
 
-/// Index of the largest value; ties go to the lowest index.
+/// Index of the largest value; ties go to the lowest index, and a NaN is never the largest
+/// while a number is left (the core's step refuses non-finite probabilities before this).
 pub fn argmax(p: &[f64; MANEUVERS]) -> Maneuver {
     let mut best = 0;
     for i in 1..MANEUVERS {
-        if p[i] > p[best] {
+        if p[i] > p[best] || (p[best].is_nan() && !p[i].is_nan()) {
             best = i;
         }
     }

@@ -88,6 +88,9 @@ pub enum FallbackReason {
     NoFeasibleTrajectory = 1,
     /// The scene is older than the staleness limit (decided by the host).
     StaleScene = 2,
+    /// A choice probability or a trajectory score was not a finite number: never read as a
+    /// preference for the first maneuver.
+    NotFinite = 3,
 }
 }
 
@@ -364,10 +367,13 @@ impl DecisionCore {
             let cycle = self.cycle;
             advice::gate(
                 advice,
-                &self.requests,
-                lane.turn,
-                now,
-                first_look,
+                &advice::GateContext {
+                    log: &self.requests,
+                    route: lane.turn,
+                    now,
+                    first_look,
+                    p_corrected: &self.choice.p_corrected,
+                },
                 &p.advice,
                 |m| {
                     let (best, stats) = plan(
@@ -388,7 +394,13 @@ impl DecisionCore {
             decision.source = DecisionSource::Advice;
             executed = Some((m, best, stats));
         }
-        if executed.is_none() {
+        // The softmax maps NaN utilities to uniform probabilities: check the utilities.
+        let c = &self.choice;
+        let mut finite = [c.utility, c.utility_corrected, c.p_logit, c.p_corrected]
+            .iter()
+            .flatten()
+            .all(|v| v.is_finite());
+        if executed.is_none() && finite {
             // The logit choice, then "decelerate", then the others by corrected probability
             // with `fallback_samples`: every executed plan passed the same limit, collision
             // and margin checks.
@@ -430,6 +442,7 @@ impl DecisionCore {
                     ),
                 };
                 decision.plan = stats;
+                finite &= stats.score_rejects == 0;
                 if let Some(best) = best {
                     executed = Some((m, best, stats));
                     break;
@@ -444,6 +457,11 @@ impl DecisionCore {
             }
             None => {
                 let stop = ctx.yield_distance.min(self.leader_stop_distance());
+                decision.fallback = if finite {
+                    FallbackReason::NoFeasibleTrajectory
+                } else {
+                    FallbackReason::NotFinite
+                };
                 self.minimum_risk(stop, &lane, &mut decision)
             }
         }
@@ -473,7 +491,6 @@ impl DecisionCore {
     /// all, as "keep speed" or "accelerate" would.
     fn minimum_risk(&mut self, stop_distance: f64, lane: &Lane, decision: &mut Decision) {
         decision.source = DecisionSource::MinimumRisk;
-        decision.fallback = FallbackReason::NoFeasibleTrajectory;
         let drive_on = [Maneuver::KeepSpeed, Maneuver::Accelerate];
         let profiles = drive_on.map(|m| self.choice.profiles[m.index()]);
         decision.maneuver = self
@@ -779,5 +796,41 @@ pub fn curve_speed_cap(lane: &Lane, s: f64, distance: f64, p: &params::Trajector
         libm::sqrt(p.max_lateral_accel_mps2 / kappa).min(p.max_speed_mps)
     } else {
         p.max_speed_mps
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use scene::{paper, AgentState, BuiltIn, Vec2};
+
+    /// A NaN that gets past validation (here: parameters set behind `validate`'s back) ends in
+    /// the minimum-risk fallback with its own reason, never in the first maneuver.
+    #[test]
+    fn a_non_finite_choice_or_score_ends_in_the_minimum_risk_fallback() {
+        let ego = AgentState::moving(0, Vec2::new(40.0, 5.0), core::f64::consts::PI, 8.0);
+        let mut scene = Scene::new(0.0, ego, paper::CAV_LEFT);
+        scene.push(AgentState::moving(1, Vec2::new(-40.0, -5.0), 0.0, 8.0));
+        let fresh = || {
+            DecisionCore::new(
+                Params::default(),
+                Morphology::built_in(BuiltIn::PaperIntersection),
+            )
+            .unwrap()
+        };
+        let good = fresh().step(&scene, 0.0, None).unwrap();
+        assert_eq!(good.fallback, FallbackReason::None);
+        let breaks: [fn(&mut Params); 2] = [
+            |p| p.choice.beta[2] = f64::NAN,
+            |p| p.trajectory.j_max_norm = 0.0,
+        ];
+        for (k, set) in breaks.iter().enumerate() {
+            let mut core = fresh();
+            set(&mut core.params);
+            let d = core.step(&scene, 0.0, None).unwrap();
+            assert_eq!(d.fallback, FallbackReason::NotFinite, "break {k}");
+            assert_eq!(d.source, DecisionSource::MinimumRisk, "break {k}");
+            assert_ne!(d.maneuver, Maneuver::Accelerate, "break {k}");
+        }
     }
 }

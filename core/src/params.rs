@@ -246,8 +246,11 @@ pub struct AdviceParams {
     pub freshness_cycles: u32,
     /// Smallest confidence accepted (0.7, §4.3).
     pub confidence_min: f64,
-    /// Time after a request's issue by which its answer must arrive, s.
+    /// Time after a request's issue by which its answer must be published, s.
     pub deadline_s: f64,
+    /// A_final must be a maneuver the corrected logit keeps plausible: P_n (eq. 15) at least
+    /// this. The advice refines the choice (eq. 16), it does not override it.
+    pub prune_below: f64,
 }
 
 impl Default for AdviceParams {
@@ -256,6 +259,7 @@ impl Default for AdviceParams {
             freshness_cycles: 40,
             confidence_min: 0.7,
             deadline_s: 1.5,
+            prune_below: 0.1,
         }
     }
 }
@@ -377,93 +381,368 @@ impl Default for TrajectoryParams {
 }
 
 /// A parameter outside its allowed range.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamError {
     /// Dotted TOML path of the offending key.
     pub key: &'static str,
-    pub reason: &'static str,
+    pub problem: ParamProblem,
+}
+
+/// What is wrong with a parameter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ParamProblem {
+    /// Not finite, or outside [min, max].
+    Range { value: f64, min: f64, max: f64 },
+    /// Breaks a rule that relates it to other parameters.
+    Rule(&'static str),
 }
 
 impl core::fmt::Display for ParamError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        write!(f, "parameter `{}`: {}", self.key, self.reason)
+        match self.problem {
+            ParamProblem::Range { value, min, max } => write!(
+                f,
+                "parameter `{}` = {value}: must be a number in [{min}, {max}]",
+                self.key
+            ),
+            ParamProblem::Rule(rule) => write!(f, "parameter `{}`: {rule}", self.key),
+        }
     }
 }
 
+/// Smallest value of a parameter that divides or normalises: positive, and far enough from 0
+/// that a quotient stays finite.
+const TINY: f64 = 1e-3;
+/// Largest magnitude of a weight, gain or penalty.
+const WEIGHT: f64 = 1e3;
+
 impl Params {
-    /// Checks ranges that the core relies on.
+    /// Every number of the core with its allowed closed range [min, max]: positive where a
+    /// division or a normaliser needs it, bounded where a conversion to cycles or nanoseconds
+    /// or the fixed buffers need it. Array parameters appear once per element.
+    pub fn ranges(&self) -> impl Iterator<Item = (&'static str, f64, f64, f64)> + '_ {
+        let (l, o, c, i, a, t) = (
+            &self.limits,
+            &self.opm,
+            &self.choice,
+            &self.interaction,
+            &self.advice,
+            &self.trajectory,
+        );
+        let scalars = [
+            ("limits.max_abs_time_s", l.max_abs_time_s, 1.0, 1e15),
+            ("limits.max_abs_position_m", l.max_abs_position_m, 1.0, 1e7),
+            ("limits.max_speed_mps", l.max_speed_mps, 1.0, 200.0),
+            ("limits.max_accel_mps2", l.max_accel_mps2, 1.0, 200.0),
+            (
+                "opm.delta_ttc_threshold_s",
+                o.delta_ttc_threshold_s,
+                TINY,
+                60.0,
+            ),
+            (
+                "opm.proximity_threshold_m",
+                o.proximity_threshold_m,
+                0.0,
+                1000.0,
+            ),
+            ("opm.ttc_speed_floor_mps", o.ttc_speed_floor_mps, TINY, 10.0),
+            ("opm.ttc_max_s", o.ttc_max_s, TINY, 1000.0),
+            (
+                "opm.conflict_zone_half_m",
+                o.conflict_zone_half_m,
+                TINY,
+                50.0,
+            ),
+            (
+                "opm.lane_match_heading_rad",
+                o.lane_match_heading_rad,
+                TINY,
+                core::f64::consts::PI,
+            ),
+            (
+                "opm.intent_confidence_min",
+                o.intent_confidence_min,
+                0.0,
+                1.0,
+            ),
+            ("choice.gamma", c.gamma, 0.0, WEIGHT),
+            ("choice.lambda", c.lambda, 0.0, WEIGHT),
+            (
+                "choice.navigation_penalty",
+                c.navigation_penalty,
+                0.0,
+                WEIGHT,
+            ),
+            ("choice.idle_penalty", c.idle_penalty, 0.0, WEIGHT),
+            ("choice.idm_penalty_gain", c.idm_penalty_gain, 0.0, WEIGHT),
+            ("choice.accelerate_mps2", c.accelerate_mps2, TINY, 20.0),
+            ("choice.decelerate_mps2", c.decelerate_mps2, TINY, 20.0),
+            (
+                "choice.maneuver_horizon_s",
+                c.maneuver_horizon_s,
+                TINY,
+                60.0,
+            ),
+            (
+                "choice.reference_speed_mps",
+                c.reference_speed_mps,
+                TINY,
+                100.0,
+            ),
+            ("choice.desired_speed_mps", c.desired_speed_mps, TINY, 100.0),
+            ("choice.idm_headway_s", c.idm_headway_s, 0.0, 10.0),
+            ("choice.idm_min_gap_m", c.idm_min_gap_m, 0.0, 50.0),
+            (
+                "choice.idm_comfort_decel_mps2",
+                c.idm_comfort_decel_mps2,
+                TINY,
+                20.0,
+            ),
+            (
+                "choice.idm_max_accel_mps2",
+                c.idm_max_accel_mps2,
+                TINY,
+                20.0,
+            ),
+            (
+                "choice.ego_hurry_efficiency",
+                c.ego_hurry_efficiency,
+                -5.0,
+                5.0,
+            ),
+            (
+                "choice.other_aggressive_safety",
+                c.other_aggressive_safety,
+                -5.0,
+                5.0,
+            ),
+            (
+                "choice.other_proceeds_safety",
+                c.other_proceeds_safety,
+                -5.0,
+                5.0,
+            ),
+            (
+                "choice.other_yields_efficiency",
+                c.other_yields_efficiency,
+                -5.0,
+                5.0,
+            ),
+            (
+                "choice.conflict_intensity_safety",
+                c.conflict_intensity_safety,
+                -5.0,
+                5.0,
+            ),
+            (
+                "interaction.standing_speed_mps",
+                i.standing_speed_mps,
+                0.0,
+                10.0,
+            ),
+            (
+                "interaction.comfort_decel_mps2",
+                i.comfort_decel_mps2,
+                TINY,
+                20.0,
+            ),
+            ("interaction.standing_yield", i.standing_yield, 0.0, 1.0),
+            (
+                "interaction.proceed_accel_mps2",
+                i.proceed_accel_mps2,
+                0.0,
+                20.0,
+            ),
+            (
+                "interaction.proceed_min_speed_mps",
+                i.proceed_min_speed_mps,
+                TINY,
+                100.0,
+            ),
+            (
+                "interaction.proceed_top_speed_mps",
+                i.proceed_top_speed_mps,
+                TINY,
+                100.0,
+            ),
+            ("interaction.pet_go_s", i.pet_go_s, 0.0, 30.0),
+            ("interaction.pet_behind_s", i.pet_behind_s, 0.0, 30.0),
+            (
+                "interaction.max_imposed_decel_mps2",
+                i.max_imposed_decel_mps2,
+                TINY,
+                20.0,
+            ),
+            ("interaction.reaction_s", i.reaction_s, 0.0, 10.0),
+            ("interaction.trust_yield", i.trust_yield, 0.0, 1.0),
+            (
+                "interaction.priority_yield_weight",
+                i.priority_yield_weight,
+                0.0,
+                1.0,
+            ),
+            ("interaction.deadlock_wait_s", i.deadlock_wait_s, 0.0, 600.0),
+            ("interaction.creep_speed_mps", i.creep_speed_mps, 0.0, 10.0),
+            (
+                "interaction.deadlock_after_s",
+                i.deadlock_after_s,
+                0.0,
+                600.0,
+            ),
+            ("interaction.watch_s", i.watch_s, 0.0, 600.0),
+            (
+                "interaction.courtesy_penalty",
+                i.courtesy_penalty,
+                0.0,
+                WEIGHT,
+            ),
+            ("advice.confidence_min", a.confidence_min, 0.0, 1.0),
+            ("advice.deadline_s", a.deadline_s, TINY, 60.0),
+            ("advice.prune_below", a.prune_below, 0.0, 1.0),
+            ("trajectory.horizon_s", t.horizon_s, TINY, 60.0),
+            ("trajectory.dt_s", t.dt_s, TINY, 1.0),
+            ("trajectory.sigma_rel", t.sigma_rel, 0.0, 1.0),
+            ("trajectory.sigma_lateral_m", t.sigma_lateral_m, 0.0, 5.0),
+            ("trajectory.sigma_clip", t.sigma_clip, TINY, 5.0),
+            ("trajectory.min_duration_s", t.min_duration_s, TINY, 60.0),
+            ("trajectory.max_duration_s", t.max_duration_s, TINY, 60.0),
+            ("trajectory.c_efficiency", t.c_efficiency, 0.0, WEIGHT),
+            ("trajectory.c_smoothness", t.c_smoothness, 0.0, WEIGHT),
+            ("trajectory.c_lateral", t.c_lateral, 0.0, WEIGHT),
+            ("trajectory.t_ref_s", t.t_ref_s, TINY, 60.0),
+            ("trajectory.j_max_norm", t.j_max_norm, TINY, 1e4),
+            ("trajectory.max_speed_mps", t.max_speed_mps, TINY, 100.0),
+            ("trajectory.max_accel_mps2", t.max_accel_mps2, TINY, 20.0),
+            ("trajectory.max_brake_mps2", t.max_brake_mps2, TINY, 20.0),
+            (
+                "trajectory.emergency_brake_mps2",
+                t.emergency_brake_mps2,
+                TINY,
+                20.0,
+            ),
+            ("trajectory.max_jerk_mps3", t.max_jerk_mps3, TINY, 100.0),
+            (
+                "trajectory.max_lateral_accel_mps2",
+                t.max_lateral_accel_mps2,
+                TINY,
+                20.0,
+            ),
+            ("trajectory.max_curvature", t.max_curvature, TINY, 2.0),
+            ("trajectory.low_speed_mps", t.low_speed_mps, 0.0, 20.0),
+            (
+                "trajectory.max_lateral_offset_m",
+                t.max_lateral_offset_m,
+                TINY,
+                5.0,
+            ),
+            (
+                "trajectory.vehicle_length_m",
+                t.vehicle_length_m,
+                TINY,
+                30.0,
+            ),
+            ("trajectory.vehicle_width_m", t.vehicle_width_m, TINY, 5.0),
+            ("trajectory.safety_margin_m", t.safety_margin_m, 0.0, 5.0),
+            (
+                "trajectory.margin_growth_mps",
+                t.margin_growth_mps,
+                0.0,
+                5.0,
+            ),
+            ("trajectory.stop_margin_m", t.stop_margin_m, 0.0, 20.0),
+            ("trajectory.yield_check_s", t.yield_check_s, TINY, 60.0),
+        ];
+        let arrays = [
+            ("saliency.key", &self.saliency.key[..], -WEIGHT, WEIGHT),
+            ("choice.beta", &c.beta[..], -WEIGHT, WEIGHT),
+            (
+                "choice.ego_style_safety",
+                &c.ego_style_safety[..],
+                -5.0,
+                5.0,
+            ),
+            (
+                "choice.ego_style_efficiency",
+                &c.ego_style_efficiency[..],
+                -5.0,
+                5.0,
+            ),
+            (
+                "choice.ego_task_efficiency",
+                &c.ego_task_efficiency[..],
+                -5.0,
+                5.0,
+            ),
+            (
+                "choice.other_task_safety",
+                &c.other_task_safety[..],
+                -5.0,
+                5.0,
+            ),
+        ];
+        scalars.into_iter().chain(
+            arrays.into_iter().flat_map(|(key, values, min, max)| {
+                values.iter().map(move |&v| (key, v, min, max))
+            }),
+        )
+    }
+
+    /// Checks every number against [`Params::ranges`], the counts against the fixed buffers,
+    /// and the rules that relate parameters.
     pub fn validate(&self) -> Result<(), ParamError> {
-        let t = &self.trajectory;
-        let bad = |key, reason| Err(ParamError { key, reason });
-        let all_finite = [
-            self.opm.delta_ttc_threshold_s,
-            self.opm.proximity_threshold_m,
-            self.opm.ttc_speed_floor_mps,
-            self.opm.ttc_max_s,
-            self.advice.confidence_min,
-            self.advice.deadline_s,
-            self.choice.gamma,
-            self.choice.lambda,
-            t.horizon_s,
-            t.dt_s,
-            t.sigma_rel,
-            t.sigma_lateral_m,
-            t.vehicle_length_m,
-            t.vehicle_width_m,
-            t.safety_margin_m,
-        ]
-        .iter()
-        .chain(self.choice.beta.iter())
-        .chain(self.saliency.key.iter())
-        .all(|v| v.is_finite());
-        if !all_finite {
-            return bad("*", "every number must be finite");
+        for (key, value, min, max) in self.ranges() {
+            // Not `value < min || value > max`: NaN fails this test.
+            if !(min..=max).contains(&value) {
+                return Err(ParamError {
+                    key,
+                    problem: ParamProblem::Range { value, min, max },
+                });
+            }
         }
+        let t = &self.trajectory;
+        let bad = |key, rule| {
+            Err(ParamError {
+                key,
+                problem: ParamProblem::Rule(rule),
+            })
+        };
         if t.samples == 0 || t.samples > MAX_SAMPLES {
             return bad("trajectory.samples", "must be in 1..=1024");
         }
         if t.fallback_samples == 0 || t.fallback_samples > MAX_SAMPLES {
             return bad("trajectory.fallback_samples", "must be in 1..=1024");
         }
-        if t.dt_s <= 0.0 || t.horizon_s <= 0.0 || t.horizon_s / t.dt_s > MAX_STEPS as f64 + 1e-6 {
+        if t.horizon_s / t.dt_s > MAX_STEPS as f64 + 1e-6 {
             return bad("trajectory.horizon_s", "horizon_s / dt_s must be in 1..=64");
         }
-        if !(t.yield_check_s > 0.0 && t.yield_check_s <= t.horizon_s) {
+        if t.yield_check_s > t.horizon_s {
             return bad(
                 "trajectory.yield_check_s",
-                "need 0 < yield_check_s <= horizon_s",
+                "need yield_check_s <= horizon_s",
             );
         }
-        if !(t.min_duration_s > 0.0 && t.min_duration_s <= t.max_duration_s) {
+        if t.min_duration_s > t.max_duration_s {
             return bad(
                 "trajectory.min_duration_s",
-                "need 0 < min_duration_s <= max_duration_s",
+                "need min_duration_s <= max_duration_s",
             );
         }
-        if !(0.0..=1.0).contains(&t.sigma_rel) || t.sigma_clip <= 0.0 || t.sigma_clip > 5.0 {
+        if self.interaction.proceed_min_speed_mps > self.interaction.proceed_top_speed_mps {
             return bad(
-                "trajectory.sigma_rel",
-                "sigma_rel in [0, 1], sigma_clip in (0, 5]",
+                "interaction.proceed_min_speed_mps",
+                "need proceed_min_speed_mps <= proceed_top_speed_mps",
             );
-        }
-        if self.opm.ttc_speed_floor_mps <= 0.0 {
-            return bad("opm.ttc_speed_floor_mps", "must be > 0 (eq. 4 guard)");
-        }
-        if !(0.0..=1.0).contains(&self.advice.confidence_min) {
-            return bad("advice.confidence_min", "must be in [0, 1]");
         }
         if self.advice.freshness_cycles == 0
             || self.advice.freshness_cycles as usize > crate::advice::MAX_PENDING
         {
             return bad("advice.freshness_cycles", "must be in 1..=256");
         }
-        if !(0.0..=1.0).contains(&self.interaction.priority_yield_weight) {
-            return bad("interaction.priority_yield_weight", "must be in [0, 1]");
-        }
-        if t.max_brake_mps2 <= 0.0 || t.emergency_brake_mps2 < t.max_brake_mps2 {
+        if t.emergency_brake_mps2 < t.max_brake_mps2 {
             return bad(
                 "trajectory.emergency_brake_mps2",
-                "need 0 < max_brake <= emergency_brake",
+                "need max_brake_mps2 <= emergency_brake_mps2",
             );
         }
         Ok(())

@@ -149,6 +149,20 @@ impl ExplicitIntent {
         task: None,
     };
 
+    /// Every confidence finite and in [0, 1]: the rule for intents from scene frames and from
+    /// the sidecar's parses alike.
+    pub fn check(&self) -> Result<(), SceneErrorKind> {
+        for c in self.confidences().into_iter().flatten() {
+            if !c.is_finite() {
+                return Err(SceneErrorKind::NotFinite);
+            }
+            if !(0.0..=1.0).contains(&c) {
+                return Err(SceneErrorKind::OutOfRange);
+            }
+        }
+        Ok(())
+    }
+
     /// The style, if its confidence reaches `threshold` (weak intents are ignored, §4.3).
     pub fn strong_style(&self, threshold: f64) -> Option<Style> {
         strong(self.style, threshold)
@@ -394,15 +408,9 @@ fn check_agent(a: &AgentState, lim: &InputLimits) -> Result<(), (SceneField, Sce
     if a.heading.abs() > 100.0 {
         return Err((SceneField::Heading, OutOfRange));
     }
-    for c in a.intent.confidences().into_iter().flatten() {
-        if !c.is_finite() {
-            return Err((SceneField::IntentConfidence, NotFinite));
-        }
-        if !(0.0..=1.0).contains(&c) {
-            return Err((SceneField::IntentConfidence, OutOfRange));
-        }
-    }
-    Ok(())
+    a.intent
+        .check()
+        .map_err(|kind| (SceneField::IntentConfidence, kind))
 }
 
 coded_enum! {

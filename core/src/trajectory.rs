@@ -463,6 +463,8 @@ pub struct PlanStats {
     pub collision_rejects: u16,
     /// Rejected for ending the horizon standing inside a conflict zone.
     pub zone_rejects: u16,
+    /// Feasible but scored by a number that is not finite: a defect upstream, never a plan.
+    pub score_rejects: u16,
     /// S_k of the best candidate (∞ when none).
     pub best_score: f64,
 }
@@ -839,6 +841,7 @@ impl Planner {
         for k in 0..n {
             stats.evaluated += 1;
             match self.evaluate(self.end_t[k], self.end_v[k], self.end_l[k], p) {
+                Ok(c) if !c.score.is_finite() => stats.score_rejects += 1,
                 Ok(c) => {
                     stats.feasible += 1;
                     if c.score < stats.best_score {

@@ -49,12 +49,16 @@ fn ten_thousand_steps_with_32_agents_and_1024_samples_allocate_nothing() {
             request_id: k.max(1),
             maneuver: Maneuver::Decelerate,
             confidence: 0.9,
-            received_at_s: t,
+            published_at_s: t,
         };
         let d = core
             .step(&scene, t, (k % 3 == 0).then_some(&advice))
             .expect("valid scene");
         decisions += u64::from(d.trajectory.n > 0);
+        if k % 100 == 0 {
+            // The stale-scene fallback between frames.
+            assert!(core.stale_fallback(t + 0.5).is_some());
+        }
     }
     let after = allocations();
     assert_eq!(decisions, 10_000);

@@ -2,7 +2,7 @@
 mod common;
 
 use common::*;
-use concord_core::advice::{gate, Advice, AdviceVerdict, RequestLog};
+use concord_core::advice::{gate, Advice, AdviceVerdict, GateContext, RequestLog};
 use concord_core::choice::{argmax, correct, cosine, idm_accel, ChoiceHistory, Maneuver, Profile};
 use concord_core::opm::{delta_ttc, guarded_ttc};
 use concord_core::params::{AdviceParams, ChoiceParams, OpmParams, Params};
@@ -150,6 +150,11 @@ fn eq12_and_14_corrected_utility() {
         Maneuver::Decelerate,
         "ties go to the lower index"
     );
+    assert_eq!(
+        argmax(&[f64::NAN, 0.1, 0.3, f64::NAN, 0.2]),
+        Maneuver::KeepSpeed,
+        "a NaN is never the largest"
+    );
 }
 
 #[test]
@@ -228,128 +233,89 @@ fn eq16_gate_checks_in_order() {
         request_id: id,
         maneuver: Maneuver::Accelerate,
         confidence: conf,
-        received_at_s: at,
+        published_at_s: at,
     };
-    let safe = |_| true;
+    // P_n of accelerate 0.2, of decelerate 0.05: only decelerate is implausible.
+    let pc = [0.2, 0.05, 0.25, 0.25, 0.25];
+    let judge = |a: Option<&Advice>, now, first_look, safe: bool| {
+        let g = GateContext {
+            log: &log,
+            route: Turn::Left,
+            now,
+            first_look,
+            p_corrected: &pc,
+        };
+        gate(a, &g, &p, |_| safe)
+    };
+    let verdict = |a: &Advice, now| judge(Some(a), now, true, true).1;
+    assert_eq!(judge(None, 2.5, true, true).1, AdviceVerdict::NoAdvice);
     assert_eq!(
-        gate(None, &log, Turn::Left, 2.5, true, &p, safe).1,
-        AdviceVerdict::NoAdvice
-    );
-    assert_eq!(
-        gate(
-            Some(&advice(45, 0.9, 2.5)),
-            &log,
-            Turn::Left,
-            2.5,
-            true,
-            &p,
-            safe
-        ),
+        judge(Some(&advice(45, 0.9, 2.5)), 2.5, true, true),
         (Some(Maneuver::Accelerate), AdviceVerdict::Accepted)
     );
+    let unknown = AdviceVerdict::UnknownRequest;
     assert_eq!(
-        gate(
-            Some(&advice(5, 0.9, 2.5)),
-            &log,
-            Turn::Left,
-            2.5,
-            true,
-            &p,
-            safe
-        )
-        .1,
-        AdviceVerdict::UnknownRequest,
+        verdict(&advice(5, 0.9, 2.5), 2.5),
+        unknown,
         "older than 40 cycles"
     );
     assert_eq!(
-        gate(
-            Some(&advice(51, 0.9, 2.5)),
-            &log,
-            Turn::Left,
-            2.5,
-            true,
-            &p,
-            safe
-        )
-        .1,
-        AdviceVerdict::UnknownRequest,
+        verdict(&advice(51, 0.9, 2.5), 2.5),
+        unknown,
         "not issued yet"
     );
     assert_eq!(
-        gate(
-            Some(&advice(45, 0.69, 2.5)),
-            &log,
-            Turn::Left,
-            2.5,
-            true,
-            &p,
-            safe
-        )
-        .1,
+        verdict(&advice(45, 0.69, 2.5), 2.5),
         AdviceVerdict::LowConfidence
     );
-    // Request 45 was issued at 2.25 s; its deadline is 3.75 s.
+    // Request 45 was issued at 2.25 s; its deadline is 3.75 s. The publish stamp decides,
+    // not the cycle that reads it.
     assert_eq!(
-        gate(
-            Some(&advice(45, 0.9, 3.76)),
-            &log,
-            Turn::Left,
-            2.5,
-            true,
-            &p,
-            safe
-        )
-        .1,
-        AdviceVerdict::Late
+        verdict(&advice(45, 0.9, 3.74), 3.9),
+        AdviceVerdict::Accepted
+    );
+    assert_eq!(verdict(&advice(45, 0.9, 3.76), 3.9), AdviceVerdict::Late);
+    let malformed = AdviceVerdict::Malformed;
+    assert_eq!(verdict(&advice(45, f64::NAN, 2.5), 2.5), malformed);
+    assert_eq!(
+        verdict(&advice(45, 1.5, 2.5), 2.5),
+        malformed,
+        "confidence > 1"
+    );
+    assert_eq!(verdict(&advice(45, 0.9, f64::NAN), 2.5), malformed);
+    assert_eq!(
+        verdict(&advice(45, 0.9, 2.6), 2.5),
+        malformed,
+        "stamped in the future"
     );
     assert_eq!(
-        gate(
-            Some(&advice(45, f64::NAN, 2.5)),
-            &log,
-            Turn::Left,
-            2.5,
-            true,
-            &p,
-            safe
-        )
-        .1,
-        AdviceVerdict::Malformed
+        verdict(&advice(45, 0.9, 2.2), 2.5),
+        malformed,
+        "before its request"
     );
     let right = Advice {
         maneuver: Maneuver::TurnRight,
         ..advice(45, 0.9, 2.5)
     };
+    assert_eq!(verdict(&right, 2.5), AdviceVerdict::NavigationInconsistent);
+    let implausible = Advice {
+        maneuver: Maneuver::Decelerate,
+        ..advice(45, 0.9, 2.5)
+    };
+    assert_eq!(verdict(&implausible, 2.5), AdviceVerdict::Implausible);
     assert_eq!(
-        gate(Some(&right), &log, Turn::Left, 2.5, true, &p, safe).1,
-        AdviceVerdict::NavigationInconsistent
-    );
-    assert_eq!(
-        gate(
-            Some(&advice(45, 0.9, 2.5)),
-            &log,
-            Turn::Left,
-            2.5,
-            true,
-            &p,
-            |_| false
-        ),
+        judge(Some(&advice(45, 0.9, 2.5)), 2.5, true, false),
         (None, AdviceVerdict::Unsafe)
     );
     // Accepted advice applies until its request's deadline (3.75 s), then expires; the first
     // cycle to see it judges it even after the deadline.
     let a = advice(45, 0.9, 3.7);
     assert_eq!(
-        gate(Some(&a), &log, Turn::Left, 3.74, false, &p, safe).1,
+        judge(Some(&a), 3.74, false, true).1,
         AdviceVerdict::Accepted
     );
-    assert_eq!(
-        gate(Some(&a), &log, Turn::Left, 3.76, false, &p, safe).1,
-        AdviceVerdict::Expired
-    );
-    assert_eq!(
-        gate(Some(&a), &log, Turn::Left, 3.76, true, &p, safe).1,
-        AdviceVerdict::Accepted
-    );
+    assert_eq!(judge(Some(&a), 3.76, false, true).1, AdviceVerdict::Expired);
+    assert_eq!(judge(Some(&a), 3.76, true, true).1, AdviceVerdict::Accepted);
 }
 
 #[test]

@@ -2,7 +2,7 @@
 mod common;
 
 use common::*;
-use concord_core::advice::{gate, Advice, AdviceVerdict, RequestLog};
+use concord_core::advice::{gate, Advice, AdviceVerdict, GateContext, RequestLog};
 use concord_core::choice::Maneuver;
 use concord_core::opm::{delta_ttc, guarded_ttc};
 use concord_core::params::{AdviceParams, OpmParams};
@@ -135,27 +135,6 @@ proptest! {
     }
 
     #[test]
-    fn gate_accepts_exactly_when_every_condition_holds(
-        latest in 1u64..500, id in 0u64..520, conf in -0.2..1.2f64, delay in -1.0..3.0f64,
-        maneuver in 0u8..5, route in 0u8..3, safe: bool, nan: bool, first_look: bool, wait in 0.0..3.0f64,
-    ) {
-        let p = AdviceParams::default();
-        let mut log = RequestLog::default();
-        for c in 1..=latest { log.issue(c, c as f64 * 0.05); }
-        let route = [Turn::Straight, Turn::Left, Turn::Right][route as usize];
-        let m = Maneuver::try_from(maneuver).unwrap();
-        let issued = id as f64 * 0.05;
-        let advice = Advice { request_id: id, maneuver: m, confidence: if nan { f64::NAN } else { conf }, received_at_s: issued + delay };
-        let now = advice.received_at_s + wait;
-        let (applied, verdict) = gate(Some(&advice), &log, route, now, first_look, &p, |_| safe);
-        let fresh = id >= 1 && id <= latest && latest - id < p.freshness_cycles as u64;
-        let expired = !first_look && now > issued + p.deadline_s;
-        let expected = !nan && fresh && !expired && conf >= p.confidence_min && delay <= p.deadline_s && m.consistent_with(route) && safe;
-        prop_assert_eq!(verdict == AdviceVerdict::Accepted, expected);
-        prop_assert_eq!(applied, if expected { Some(m) } else { None });
-    }
-
-    #[test]
     fn non_finite_input_is_rejected_with_a_reason(ego in ego_spec(), agents in prop::collection::vec(agent_spec(), 1..8),
                                                   which in 0usize..8, field in 0usize..6, bad in prop::sample::select(vec![f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300])) {
         let mut core = paper_core(Params::default());
@@ -174,6 +153,54 @@ proptest! {
         prop_assert!(err.is_err(), "accepted a frame with {bad} in field {field}");
         // The core is unharmed and decides on the next good frame.
         prop_assert!(core.step(&good, 0.0, None).is_ok());
+    }
+
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 4096, failure_persistence: None, ..ProptestConfig::default() })]
+
+    /// Each condition holds in most cases, so that every single one failing alone is common;
+    /// ids are fresh and stale in equal shares.
+    #[test]
+    fn gate_accepts_exactly_when_every_condition_holds(
+        latest in 1u64..500, fresh: bool, back in 0u64..1000,
+        conf in prop_oneof![3 => 0.7..=1.0f64, 1 => -0.2..1.2f64],
+        delay in prop_oneof![1 => 0.0..1.5f64, 1 => -1.0..3.0f64],
+        maneuver in 0u8..5, route in 0u8..3, safe in prop::bool::weighted(0.85),
+        nan in prop::bool::weighted(0.1), first_look: bool,
+        wait in prop_oneof![6 => 0.0..3.0f64, 1 => -0.5..0.0f64],
+        pn in prop_oneof![3 => 0.1..1.0f64, 1 => 0.0..0.3f64],
+    ) {
+        let p = AdviceParams::default();
+        let window = p.freshness_cycles as u64;
+        let mut log = RequestLog::default();
+        for c in 1..=latest { log.issue(c, c as f64 * 0.05); }
+        // Fresh and stale ids in equal shares; stale: never issued (0 or later) or too old.
+        let id = if fresh {
+            latest - back % window.min(latest)
+        } else {
+            match back % 3 { 0 => 0, 1 => latest + 1 + back, _ => latest.saturating_sub(window + back % 100) }
+        };
+        prop_assert_eq!(fresh, id >= 1 && id <= latest && latest - id < window);
+        let route = [Turn::Straight, Turn::Left, Turn::Right][route as usize];
+        let m = Maneuver::try_from(maneuver).unwrap();
+        let mut pc = [0.2; 5];
+        pc[m.index()] = pn;
+        let issued = id as f64 * 0.05;
+        let advice = Advice { request_id: id, maneuver: m, confidence: if nan { f64::NAN } else { conf }, published_at_s: issued + delay };
+        let now = advice.published_at_s + wait;
+        let g = GateContext { log: &log, route, now, first_look, p_corrected: &pc };
+        let (applied, verdict) = gate(Some(&advice), &g, &p, |_| safe);
+        let well_formed = !nan && (0.0..=1.0).contains(&conf) && wait >= 0.0 && delay >= 0.0;
+        let expired = !first_look && now > issued + p.deadline_s;
+        let expected = well_formed && fresh && !expired && conf >= p.confidence_min && delay <= p.deadline_s
+            && m.consistent_with(route) && pn >= p.prune_below && safe;
+        prop_assert_eq!(verdict == AdviceVerdict::Accepted, expected);
+        prop_assert_eq!(applied, if expected { Some(m) } else { None });
+        if fresh && !nan && (0.0..=1.0).contains(&conf) && (wait < 0.0 || delay < 0.0) {
+            prop_assert_eq!(verdict, AdviceVerdict::Malformed, "a stamp in the future or before its request");
+        }
     }
 
 }

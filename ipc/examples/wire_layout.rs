@@ -1,13 +1,43 @@
-//! Prints the size, alignment, type name and field offsets of every wire type as JSON, for the
-//! layout test of the Python mirror (`bridges/python/test_wire_layout.py`).
+//! Prints the size, alignment, type name and field offsets and types of every wire type as JSON,
+//! for the layout test of the Python mirror (`bridges/python/test_wire_layout.py`).
 
 use concord_ipc::wire::*;
 use iceoryx2::prelude::ZeroCopySend;
 use std::mem::{align_of, offset_of, size_of};
 
+/// The type of the field `field` selects, e.g. `type_of(|s: &WireAgent| &s.x)` is `f64`.
+fn type_of<S, T>(_field: fn(&S) -> &T) -> &'static str {
+    std::any::type_name::<T>()
+}
+
+/// `name` without module paths: `[concord_ipc::wire::WireAgent; 32]` -> `[WireAgent; 32]`.
+fn short(name: &str) -> String {
+    let mut out = String::new();
+    let mut path_start = 0; // where the path being copied starts in `out`
+    let mut rest = name;
+    while let Some(c) = rest.chars().next() {
+        if let Some(after) = rest.strip_prefix("::") {
+            out.truncate(path_start);
+            rest = after;
+            continue;
+        }
+        out.push(c);
+        if !(c.is_alphanumeric() || c == '_') {
+            path_start = out.len();
+        }
+        rest = &rest[c.len_utf8()..];
+    }
+    out
+}
+
 macro_rules! layout {
     ($ty:ty { $($field:ident),+ $(,)? }) => {{
-        let fields: Vec<String> = vec![$(format!("\"{}\": {}", stringify!($field), offset_of!($ty, $field))),+];
+        let fields: Vec<String> = vec![$(format!(
+            "\"{}\": {{\"offset\": {}, \"type\": \"{}\"}}",
+            stringify!($field),
+            offset_of!($ty, $field),
+            short(type_of(|s: &$ty| &s.$field))
+        )),+];
         // SAFETY: type_name only reads the name given to the derive.
         let name = unsafe { <$ty as ZeroCopySend>::type_name() };
         format!(
@@ -141,7 +171,7 @@ fn main() {
         }),
         layout!(WireAdvice {
             request_id,
-            created_ns,
+            published_ns,
             confidence,
             ego_intent,
             agent_intents,

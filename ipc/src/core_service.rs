@@ -16,7 +16,7 @@ use std::time::Duration;
 
 use concord_core::negotiation::Phase;
 use concord_core::scene::{ExplicitIntent, Scene, SceneErrorKind};
-use concord_core::{Advice, AdviceVerdict, DecisionCore, Maneuver, Params};
+use concord_core::{Advice, AdviceVerdict, DecisionCore, FallbackReason, Params};
 use hdrhistogram::Histogram;
 use iceoryx2::config::Config;
 use iceoryx2::port::publisher::Publisher;
@@ -115,25 +115,41 @@ impl RunConfig {
                 s.rate_hz
             ));
         }
-        if !(s.staleness_s.is_finite() && s.staleness_s > 0.0) {
-            return Err("service.staleness_s must be > 0".into());
+        // Each period becomes nanoseconds added to the clock: bounded so none can overflow.
+        let periods = [
+            ("service.staleness_s", s.staleness_s, 1e-3, 60.0),
+            ("service.intent_hold_s", s.intent_hold_s, 0.0, 3600.0),
+            ("service.stats_period_s", s.stats_period_s, 1e-3, 3600.0),
+            ("service.print_period_s", s.print_period_s, 0.0, 3600.0),
+        ];
+        for (key, v, min, max) in periods {
+            if !(min..=max).contains(&v) {
+                return Err(format!("{key} = {v}: expected {min} to {max} s"));
+            }
         }
-        if !(s.intent_hold_s.is_finite() && s.intent_hold_s >= 0.0) {
-            return Err("service.intent_hold_s must be >= 0".into());
-        }
-        if !(s.stats_period_s.is_finite()
-            && s.stats_period_s > 0.0
-            && s.print_period_s.is_finite()
-            && s.print_period_s >= 0.0)
+        if let Some(cpu) = self
+            .realtime
+            .cpu
+            .filter(|&c| c >= libc::CPU_SETSIZE as usize)
         {
-            return Err("service.stats_period_s must be > 0 and print_period_s >= 0".into());
+            return Err(format!(
+                "realtime.cpu = {cpu}: expected a CPU below {}",
+                libc::CPU_SETSIZE
+            ));
+        }
+        if let Some(p) = self
+            .realtime
+            .fifo_priority
+            .filter(|p| !(1..=99).contains(p))
+        {
+            return Err(format!("realtime.fifo_priority = {p}: expected 1 to 99"));
         }
         self.core.validate().map_err(|e| format!("core: {e}"))?;
         let needed = self.freshness_needed();
         if needed > concord_core::advice::MAX_PENDING as u32 {
             return Err(format!(
-                "core.advice.deadline_s = {} s at {} Hz spans {needed} cycles, more than the {} \
-                 requests the core remembers",
+                "core.advice.deadline_s = {} s at service.rate_hz = {} Hz spans {needed} cycles, \
+                 more than the {} requests the core remembers",
                 self.core.advice.deadline_s,
                 s.rate_hz,
                 concord_core::advice::MAX_PENDING
@@ -182,21 +198,6 @@ struct LanguageIntents {
 }
 
 impl LanguageIntents {
-    /// The intents carried by `a`; a dimension with an unknown code is left out.
-    fn from_advice(a: &WireAdvice, expires_ns: u64) -> Self {
-        let mut out = LanguageIntents {
-            ego: a.ego_intent.to_intent().unwrap_or_default(),
-            expires_ns,
-            ..Default::default()
-        };
-        for w in a.agent_intents.iter().take(a.n_agent_intents as usize) {
-            if let Ok(i) = w.intent.to_intent() {
-                out.agents[out.n_agents] = (w.agent_id, i);
-                out.n_agents += 1;
-            }
-        }
-        out
-    }
     /// Merges the held intents into `scene`, each dimension keeping the more confident parse;
     /// weak ones are ignored later by the core's threshold.
     fn apply(&self, scene: &mut Scene, now_ns: u64) {
@@ -348,7 +349,9 @@ pub fn run_observed(
         .attach_interval(Duration::from_nanos(period_ns))
         .map_err(|e| IpcError(format!("attaching the {period_ns} ns interval: {e:?}")))?;
     state.notifier.ready();
-    let until_ns = stop.duration_s.map(|d| now + (d * 1e9) as u64);
+    let until_ns = stop
+        .duration_s
+        .map(|d| now.saturating_add((d * 1e9) as u64));
     let mut failure = None;
     let result = waitset.wait_and_process(|id| {
         if id.has_event_from(&tick) {
@@ -426,24 +429,25 @@ impl Loop<'_> {
         Ok(())
     }
 
+    /// Installs a valid advice and the intents it carries ([`WireAdvice::check`]). A failure
+    /// report installs nothing; nor does a malformed advice, which is counted.
     fn take_advice(&mut self, a: &WireAdvice, now: u64) {
-        self.intents = LanguageIntents::from_advice(a, now + (self.cfg.intent_hold_s * 1e9) as u64);
-        if a.valid == 0 {
-            self.stats.advice_verdicts[AdviceVerdict::NoAdvice as usize] += 1;
-            if let Some(f) = AdviceFailure::from_code(a.failure) {
-                self.stats.advice_failures[f as usize] += 1;
-            }
-            return;
-        }
-        match Maneuver::try_from(a.maneuver) {
-            Ok(maneuver) => {
-                self.advice = Some(Advice {
-                    request_id: a.request_id,
-                    maneuver,
-                    confidence: a.confidence,
-                    received_at_s: secs(now),
-                });
+        match a.check(now) {
+            Ok(Some(c)) => {
+                self.intents = LanguageIntents {
+                    ego: c.ego,
+                    agents: c.agents,
+                    n_agents: c.n_agents,
+                    expires_ns: now.saturating_add((self.cfg.intent_hold_s * 1e9) as u64),
+                };
+                self.advice = Some(c.advice);
                 self.advice_unjudged = true;
+            }
+            Ok(None) => {
+                self.stats.advice_verdicts[AdviceVerdict::NoAdvice as usize] += 1;
+                if let Some(f) = AdviceFailure::from_code(a.failure) {
+                    self.stats.advice_failures[f as usize] += 1;
+                }
             }
             Err(_) => self.stats.advice_verdicts[AdviceVerdict::Malformed as usize] += 1,
         }
@@ -460,7 +464,12 @@ impl Loop<'_> {
                 return self.reject(FrameReject::Duplicate);
             }
             if f.sequence < seq {
-                if f.stamp_ns <= stamp {
+                // Once the scene is stale, an older frame starts the source over: a bogus
+                // frame with a far sequence and stamp cannot lock out a live source.
+                let stale = self
+                    .last_valid_rx_ns
+                    .is_none_or(|t| rx.saturating_sub(t) >= (self.cfg.staleness_s * 1e9) as u64);
+                if f.stamp_ns <= stamp && !stale {
                     return self.reject(FrameReject::OutOfOrder);
                 }
                 self.stats.publisher_restarts += 1;
@@ -611,12 +620,14 @@ pub fn render_stats(s: &CoreStats, out: &mut impl std::fmt::Write) {
     }
     let _ = write!(
         out,
-        ", restarts {} | decisions logit={} advice={} minimum_risk={} (stale {}) | advice {} in:",
+        ", restarts {} | decisions logit={} advice={} minimum_risk={} (stale {}, not finite {}) \
+         | advice {} in:",
         s.publisher_restarts,
         s.decisions[0],
         s.decisions[1],
         s.decisions[2],
-        s.fallbacks[2],
+        s.fallbacks[FallbackReason::StaleScene as usize],
+        s.fallbacks[FallbackReason::NotFinite as usize],
         s.advice_received
     );
     for v in AdviceVerdict::ALL {

@@ -13,8 +13,10 @@ use concord_core::scene::{
 };
 use concord_core::trajectory::MAX_POINTS;
 use concord_core::{
-    opm, AdviceVerdict, Decision, DecisionCore, DecisionSource, FallbackReason, Maneuver,
+    opm, Advice, AdviceVerdict, Decision, DecisionCore, DecisionSource, FallbackReason, Maneuver,
 };
+
+use crate::clock::secs;
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Code for an absent optional value (unknown intent dimension, no lane, no conflict).
@@ -27,6 +29,8 @@ pub const EHMI_MAX_CHARS: usize = 64;
 pub const WIRE_OBJECTS: usize = opm::MAX_SELECTED;
 /// Number of `AdviceVerdict` codes.
 pub const VERDICTS: usize = AdviceVerdict::ALL.len();
+/// Number of `FallbackReason` codes.
+pub const FALLBACKS: usize = 4;
 
 /// An explicit intent [style, action, task] (eq. 8), each code with its confidence in [0, 1].
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
@@ -585,8 +589,9 @@ pub struct WireAgentIntent {
 pub struct WireAdvice {
     /// The request it answers.
     pub request_id: u64,
-    /// When the sidecar created it, ns.
-    pub created_ns: u64,
+    /// When the sidecar published it (`CLOCK_MONOTONIC`, ns): the core judges the deadline by
+    /// it, and refuses a stamp later than its own receipt or earlier than the request.
+    pub published_ns: u64,
     /// Confidence in [0, 1].
     pub confidence: f64,
     /// The passenger's parsed intent, and other road users' (up to eight).
@@ -600,6 +605,64 @@ pub struct WireAdvice {
     /// [`AdviceFailure`] code when `valid` is 0.
     pub failure: u8,
     pub reserved: [u8; 4],
+}
+
+/// A valid advice as the core takes it: A_final and the intents parsed from language that it
+/// carries.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CheckedAdvice {
+    pub advice: Advice,
+    /// The passenger's intent.
+    pub ego: ExplicitIntent,
+    /// Other road users' intents by agent id; the first `n_agents` are set.
+    pub agents: [(u32, ExplicitIntent); WIRE_OBJECTS],
+    pub n_agents: usize,
+}
+
+impl WireAdvice {
+    /// The advice, checked as a scene frame is: every code known, every confidence finite and
+    /// in [0, 1], at most [`WIRE_OBJECTS`] intents, and a publish stamp no later than its
+    /// receipt at `received_ns`. `Ok(None)` for a failure report (`valid = 0`), which carries
+    /// nothing to install; `Err` names the first field at fault.
+    pub fn check(&self, received_ns: u64) -> Result<Option<CheckedAdvice>, &'static str> {
+        if self.valid == 0 {
+            return Ok(None);
+        }
+        if self.valid != 1 {
+            return Err("valid");
+        }
+        let maneuver = Maneuver::try_from(self.maneuver).map_err(|_| "maneuver")?;
+        if !(0.0..=1.0).contains(&self.confidence) {
+            return Err("confidence");
+        }
+        if self.published_ns > received_ns {
+            return Err("published_ns");
+        }
+        let n = self.n_agent_intents as usize;
+        if n > WIRE_OBJECTS {
+            return Err("n_agent_intents");
+        }
+        let intent = |w: &WireIntent| {
+            let i = w.to_intent()?;
+            i.check().map_err(|_| "intent confidence")?;
+            Ok(i)
+        };
+        let mut out = CheckedAdvice {
+            advice: Advice {
+                request_id: self.request_id,
+                maneuver,
+                confidence: self.confidence,
+                published_at_s: secs(self.published_ns),
+            },
+            ego: intent(&self.ego_intent)?,
+            agents: [(0, ExplicitIntent::UNKNOWN); WIRE_OBJECTS],
+            n_agents: n,
+        };
+        for (o, w) in out.agents.iter_mut().zip(&self.agent_intents[..n]) {
+            *o = (w.agent_id, intent(&w.intent)?);
+        }
+        Ok(Some(out))
+    }
 }
 
 /// Why the sidecar could not answer a request; the index into [`CoreStats::advice_failures`].
@@ -858,7 +921,7 @@ pub struct CoreStats {
     /// Decisions published, by `DecisionSource` code.
     pub decisions: [u64; 3],
     /// Decisions by `FallbackReason` code.
-    pub fallbacks: [u64; 3],
+    pub fallbacks: [u64; FALLBACKS],
     pub advice_requests: u64,
     pub advice_received: u64,
     /// Each received advice by the verdict of the first decision that weighed it

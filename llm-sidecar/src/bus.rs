@@ -8,6 +8,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{mpsc as std_mpsc, Arc, Mutex};
 use std::time::Duration;
 
+use concord_ipc::clock::now_ns;
 use concord_ipc::iox::{self, IpcError};
 use concord_ipc::services;
 use concord_ipc::system::Notifier;
@@ -123,7 +124,11 @@ pub fn run(
             }
             loop {
                 match outbound.try_recv() {
-                    Ok(Outbound::Advice(a)) => iox::send(&advice, &a)?,
+                    Ok(Outbound::Advice(mut a)) => {
+                        // The core judges the deadline by this stamp.
+                        a.published_ns = now_ns();
+                        iox::send(&advice, &a)?
+                    }
                     Ok(Outbound::Ehmi(m)) => iox::send(&ehmi, &m)?,
                     Err(std_mpsc::TryRecvError::Empty) => return Ok(true),
                     Err(std_mpsc::TryRecvError::Disconnected) => return Ok(false),

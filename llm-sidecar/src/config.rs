@@ -253,7 +253,8 @@ impl SidecarConfig {
     /// Checks ranges.
     pub fn validate(&self) -> Result<(), String> {
         let l = &self.llm;
-        let positive = |v: f64| v.is_finite() && v > 0.0;
+        // Every period becomes a `Duration`: bounded to an hour so none can overflow.
+        let positive = |v: f64| v > 0.0 && v <= 3600.0;
         if !l.base_url.starts_with("http://") && !l.base_url.starts_with("https://") {
             return Err(format!(
                 "llm.base_url = {:?}: expected http(s)://…",
@@ -261,14 +262,16 @@ impl SidecarConfig {
             ));
         }
         if !(positive(l.connect_timeout_s) && positive(l.request_timeout_s)) {
-            return Err("llm.connect_timeout_s and llm.request_timeout_s must be > 0".into());
+            return Err(
+                "llm.connect_timeout_s and llm.request_timeout_s must be in (0, 3600]".into(),
+            );
         }
         if l.max_in_flight == 0 {
             return Err("llm.max_in_flight must be >= 1".into());
         }
-        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+        let non_negative = |v: f64| (0.0..=3600.0).contains(&v);
         if !(non_negative(l.min_attempt_s) && non_negative(l.retry_backoff_s)) {
-            return Err("llm.min_attempt_s and llm.retry_backoff_s must be >= 0".into());
+            return Err("llm.min_attempt_s and llm.retry_backoff_s must be in [0, 3600]".into());
         }
         if !(0.0..=1.0).contains(&l.confidence_without_logprobs) {
             return Err("llm.confidence_without_logprobs must be in [0, 1]".into());
@@ -298,7 +301,7 @@ impl SidecarConfig {
             || !positive(i.queue_s)
         {
             return Err(
-                "intent.weak_below in [0, 1], intent.max_text_chars >= 1, intent.deadline_s and queue_s > 0"
+                "intent.weak_below in [0, 1], intent.max_text_chars >= 1, intent.deadline_s and queue_s in (0, 3600]"
                     .into(),
             );
         }
@@ -306,13 +309,13 @@ impl SidecarConfig {
             return Err("intent.max_parties must be >= 1".into());
         }
         if !(positive(self.ehmi.repeat_s) && positive(self.ehmi.inquiry_interval_s)) {
-            return Err("ehmi.repeat_s and ehmi.inquiry_interval_s must be > 0".into());
+            return Err("ehmi.repeat_s and ehmi.inquiry_interval_s must be in (0, 3600]".into());
         }
         if self.log.max_bytes < 4096 {
             return Err("log.max_bytes must be >= 4096".into());
         }
-        if !(self.print_period_s.is_finite() && self.print_period_s >= 0.0) {
-            return Err("print_period_s must be >= 0".into());
+        if !non_negative(self.print_period_s) {
+            return Err("print_period_s must be in [0, 3600]".into());
         }
         Ok(())
     }

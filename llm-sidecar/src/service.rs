@@ -48,7 +48,8 @@ use crate::prompt::{self, Stated};
 use crate::reply::{Answer, ReplyError};
 use crate::schema::{self, AdviceAnswer, IntentAnswer};
 
-/// The bus publishes up to one period after the answer: leave that much before the deadline.
+/// The bus publishes (and stamps) an answer up to one period after it is ready: leave that
+/// much before the deadline.
 const PUBLISH_MARGIN: Duration = Duration::from_millis(20);
 /// A road user whose implicit yield and proceed probabilities both stay below this leaves its
 /// intent open (a proactive inquiry may settle it).
@@ -334,7 +335,7 @@ impl Sidecar {
         let (ego_intent, agent_intents, n_agent_intents) = self.intents(&s);
         let mut advice = WireAdvice {
             request_id: req.request_id,
-            created_ns: now_ns(),
+            published_ns: 0, // stamped by the bus as it publishes
             confidence: 0.0,
             ego_intent,
             agent_intents,

@@ -17,10 +17,12 @@
 //!    the prompts' own vocabulary (every word the renderers write without any message, for every
 //!    parsed intent), and it is ASCII, so no Chinese or homoglyph text is in it;
 //! 4. the same holds for every other prompt (eHMI phrasing, replies), and for the intent
-//!    parser's prompt outside its quote, which is the normalised message.
+//!    parser's prompt outside its quote, which is the normalised message;
+//! 5. the core's gate, given each advice with the intents it carries, accepts none that the
+//!    corrected logit does not keep plausible (P_n ≥ `advice.prune_below`).
 //!
-//! It prints the counts: intents set and their confidences, advice confidences, eHMI texts in
-//! the model's words and refused.
+//! It prints the counts: intents set and their confidences, advice confidences and the gate's
+//! verdicts on them, eHMI texts in the model's words and refused.
 
 #[path = "../../tests/support/fault_llm.rs"]
 mod fault_llm;
@@ -35,7 +37,7 @@ use std::time::{Duration, Instant};
 use concord_core::scene::{
     paper, AgentState, BuiltIn, IntentAction, Morphology, Scene, Style, Task, Vec2,
 };
-use concord_core::{DecisionCore, Maneuver, Params};
+use concord_core::{Advice, AdviceVerdict, Decision, DecisionCore, Maneuver, Params};
 use concord_ipc::clock::now_ns;
 use concord_ipc::wire::{
     AdviceRequest, Audience, EhmiKind, EhmiMessage, IntentText, TextSource, WireAdvice,
@@ -100,6 +102,16 @@ fn unescape(line: &str) -> String {
 /// somebody to name; returns the core's first decision as the car executes it and an advice
 /// request on it.
 fn scene() -> (WireDecision, AdviceRequest) {
+    let (scene, core, d) = first_step();
+    let request = AdviceRequest::from_core(d.cycle, 1, now_ns(), 0, &d, &core, scene.ego_lane);
+    (
+        WireDecision::from_decision(&d, 1, now_ns(), now_ns(), 0),
+        request,
+    )
+}
+
+/// The scene of [`scene`], a core and its first decision on it.
+fn first_step() -> (Scene, DecisionCore, Decision) {
     let ego = AgentState::moving(0, Vec2::new(20.0, 5.0), std::f64::consts::PI, 8.0);
     let mut scene = Scene::new(10.0, ego, paper::CAV_LEFT);
     scene.push(AgentState::moving(1, Vec2::new(-20.0, -5.0), 0.0, 8.0));
@@ -116,11 +128,36 @@ fn scene() -> (WireDecision, AdviceRequest) {
     )
     .unwrap();
     let d = core.step(&scene, scene.time_s, None).unwrap();
-    let request = AdviceRequest::from_core(d.cycle, 1, now_ns(), 0, &d, &core, scene.ego_lane);
-    (
-        WireDecision::from_decision(&d, 1, now_ns(), now_ns(), 0),
-        request,
-    )
+    (scene, core, d)
+}
+
+/// The core's decision on `scene()` 50 ms later, given advice `a` (published 10 ms before)
+/// with the intents it carries merged into the scene as the core process does; and whether
+/// the advised maneuver is among those the corrected logit keeps plausible.
+fn judge(a: &WireAdvice) -> (Decision, bool) {
+    let (mut scene, mut core, first) = first_step();
+    let c = a
+        .check(u64::MAX)
+        .expect("a well-formed advice")
+        .expect("valid");
+    scene.time_s += 0.05;
+    scene.ego.intent = scene.ego.intent.merged_with(&c.ego);
+    for agent in scene.agents.iter_mut().take(scene.n_agents) {
+        if let Some((_, i)) = c.agents[..c.n_agents]
+            .iter()
+            .find(|(id, _)| *id == agent.id)
+        {
+            agent.intent = agent.intent.merged_with(i);
+        }
+    }
+    let advice = Advice {
+        request_id: first.cycle,
+        published_at_s: scene.time_s - 0.01,
+        ..c.advice
+    };
+    let d = core.step(&scene, scene.time_s, Some(&advice)).unwrap();
+    let plausible = d.p_corrected[advice.maneuver.index()] >= Params::default().advice.prune_below;
+    (d, plausible)
 }
 
 /// Every enum value of an intent, one dimension at a time and all at once.
@@ -456,6 +493,8 @@ struct Tally {
     /// Intent dimensions set, their confidences, and those at or above 0.7.
     confidences: Vec<f64>,
     advice: Vec<f64>,
+    /// The gate's verdicts on the advice answers.
+    verdicts: BTreeMap<&'static str, usize>,
     ehmi_texts: usize,
     in_the_models_words: u64,
     refused: BTreeMap<String, usize>,
@@ -478,13 +517,14 @@ fn range(v: &[f64]) -> String {
 impl Tally {
     fn print(&self, title: &str, sender: Sender) {
         eprintln!(
-            "{title}, {sender:?}: {} messages, {} parse failures; {} intent dimensions set (confidence {}); {} advice answers (confidence {}); {} eHMI texts after the message ({} announcements in the model's words, model texts refused: {:?}), {} echoing attacker words",
+            "{title}, {sender:?}: {} messages, {} parse failures; {} intent dimensions set (confidence {}); {} advice answers (confidence {}), gate verdicts {:?}; {} eHMI texts after the message ({} announcements in the model's words, model texts refused: {:?}), {} echoing attacker words",
             self.runs,
             self.intent_failures,
             self.confidences.len(),
             range(&self.confidences),
             self.advice.len(),
             range(&self.advice),
+            self.verdicts,
             self.ehmi_texts,
             self.in_the_models_words,
             self.refused,
@@ -576,6 +616,16 @@ fn check(
         }
         if a.valid == 1 {
             tally.advice.push(a.confidence);
+            // 5. The gate, with the intents the advice carries applied to the scene.
+            let (d, plausible) = judge(a);
+            *tally.verdicts.entry(d.advice.name()).or_default() += 1;
+            if d.advice == AdviceVerdict::Accepted {
+                assert!(
+                    plausible,
+                    "{text:?}: accepted {:?} with P_n {:?}",
+                    d.maneuver, d.p_corrected
+                );
+            }
         }
     }
     // 3 and 4. The prompts: the message only in the intent parser's quote.

@@ -78,7 +78,7 @@ fn weigh(scene: &Scene, advised: Option<(Maneuver, f64)>) -> (AdviceRequest, Dec
         request_id: first.cycle,
         maneuver,
         confidence,
-        received_at_s: later.time_s - 0.01,
+        published_at_s: later.time_s - 0.01,
     });
     let d = core.step(&later, later.time_s, advice.as_ref()).unwrap();
     (request, d)

@@ -417,7 +417,7 @@ impl Controller for ConcordController {
                 request_id: id,
                 maneuver: oracle(w, drivers),
                 confidence: 1.0,
-                received_at_s: w.t,
+                published_at_s: w.t,
             }),
             _ => None,
         };
@@ -486,7 +486,7 @@ impl<'a> ExternalAdvice<'a> {
 
 impl Controller for ExternalAdvice<'_> {
     fn act(&mut self, w: &World, _: &[HumanDriver]) -> Command {
-        if let Some(a) = self.pending.filter(|a| w.t + 1e-9 >= a.received_at_s) {
+        if let Some(a) = self.pending.filter(|a| w.t + 1e-9 >= a.published_at_s) {
             self.held = Some(a);
             self.pending = None;
         }
@@ -500,7 +500,7 @@ impl Controller for ExternalAdvice<'_> {
                         request_id: d.cycle,
                         maneuver,
                         confidence,
-                        received_at_s: match self.timing {
+                        published_at_s: match self.timing {
                             Timing::Wait => w.t,
                             Timing::Latency => w.t + latency_s,
                         },

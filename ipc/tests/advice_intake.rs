@@ -1,0 +1,253 @@
+//! What the core process does with the advice it receives, over real iceoryx2 services: a
+//! malformed advice or a failure report installs nothing (the scenes after it are decided as
+//! before), and the deadline is judged by the advice's publish stamp, to the millisecond, at
+//! 20, 50 and 100 Hz. A test thread plays the sidecar.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use concord_core::scene::{paper, AgentState, Scene, Vec2};
+use concord_core::{AdviceVerdict, DecisionCore, FallbackReason, Maneuver, Params};
+use concord_ipc::clock::now_ns;
+use concord_ipc::core_service::{self, ServiceConfig, StopAfter};
+use concord_ipc::system::RealtimeConfig;
+use concord_ipc::wire::{
+    AdviceRequest, CoreStats, SceneFrame, WireAdvice, WireAgentIntent, WireIntent, UNKNOWN,
+    WIRE_OBJECTS,
+};
+use concord_ipc::{iox, services};
+use iceoryx2::config::Config;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+
+type Requests = Subscriber<ipc::Service, AdviceRequest, ()>;
+type AdviceOut = Publisher<ipc::Service, WireAdvice, ()>;
+
+/// Publishes the ego alone on the paper's approach at 20 Hz until `stop`.
+fn feeder(prefix: String, config: Config, stop: Arc<AtomicBool>) -> JoinHandle<()> {
+    std::thread::spawn(move || {
+        let node = iox::node("intake-feeder", &config).expect("node");
+        let publisher =
+            iox::publisher::<SceneFrame>(&node, &services::name(&prefix, services::SCENE))
+                .expect("publisher");
+        let mut seq = 0;
+        while !stop.load(Ordering::Relaxed) {
+            seq += 1;
+            let t = seq as f64 * 0.05;
+            let x = 60.0 - (8.0 * t) % 30.0;
+            let ego = AgentState::moving(0, Vec2::new(x, 5.0), std::f64::consts::PI, 8.0);
+            let scene = Scene::new(t, ego, paper::CAV_LEFT);
+            iox::send(&publisher, &SceneFrame::from_scene(seq, now_ns(), &scene)).expect("send");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    })
+}
+
+/// Runs the core at `rate_hz` for `seconds` beside the feeder and `sidecar`, which gets the
+/// request subscriber and the advice publisher on its own thread; returns the final counters.
+fn run(
+    prefix: &str,
+    rate_hz: f64,
+    seconds: f64,
+    sidecar: impl FnOnce(&Requests, &AdviceOut) + Send + 'static,
+) -> CoreStats {
+    let config = iox::init(None).expect("iceoryx2 config");
+    let stop = Arc::new(AtomicBool::new(false));
+    let feed = feeder(prefix.to_string(), config.clone(), stop.clone());
+    let side = {
+        let (config, prefix) = (config.clone(), prefix.to_string());
+        std::thread::spawn(move || {
+            let node = iox::node("intake-sidecar", &config).expect("node");
+            let name = |s| services::name(&prefix, s);
+            let requests = iox::subscriber(&node, &name(services::ADVICE_REQUEST), 1).expect("sub");
+            let advice = iox::publisher(&node, &name(services::ADVICE)).expect("publisher");
+            sidecar(&requests, &advice);
+        })
+    };
+    let cfg = ServiceConfig {
+        prefix: prefix.to_string(),
+        rate_hz,
+        print_period_s: 0.0,
+        ..ServiceConfig::default()
+    };
+    let mut params = Params::default();
+    params.trajectory.samples = 128;
+    params.advice.deadline_s = 0.3;
+    let mut core = Box::new(DecisionCore::new(params, cfg.geometry.morphology()).unwrap());
+    let stats = core_service::run(
+        &mut core,
+        &cfg,
+        &RealtimeConfig::default(),
+        &config,
+        StopAfter {
+            ticks: None,
+            duration_s: Some(seconds),
+        },
+    )
+    .expect("the loop runs");
+    stop.store(true, Ordering::Relaxed);
+    feed.join().expect("feeder");
+    side.join().expect("sidecar");
+    stats
+}
+
+/// The newest request issued after `after_ns`, waiting for it (at most 5 s).
+fn next_request(requests: &Requests, after_ns: u64) -> AdviceRequest {
+    let give_up = now_ns() + 5_000_000_000;
+    loop {
+        assert!(now_ns() < give_up, "no advice request for 5 s");
+        if let (Some(r), _) = iox::newest(requests).expect("receive") {
+            if r.issued_ns > after_ns {
+                return r;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+/// A confident answer to `r`: the corrected logit's own choice, so plausible and safe.
+fn answer(r: &AdviceRequest) -> WireAdvice {
+    let best = (0..5)
+        .max_by(|&a, &b| r.p_corrected[a].total_cmp(&r.p_corrected[b]))
+        .unwrap();
+    WireAdvice {
+        request_id: r.request_id,
+        published_ns: 0,
+        confidence: 0.95,
+        ego_intent: WireIntent::from_intent(&Default::default()),
+        agent_intents: [WireAgentIntent {
+            intent: WireIntent::from_intent(&Default::default()),
+            agent_id: 0,
+            reserved: [0; 4],
+        }; WIRE_OBJECTS],
+        maneuver: Maneuver::ALL[best] as u8,
+        valid: 1,
+        n_agent_intents: 0,
+        failure: 0,
+        reserved: [0; 4],
+    }
+}
+
+#[test]
+fn malformed_advice_and_failure_reports_install_nothing() {
+    let prefix = format!("intake-bad-{}/", std::process::id());
+    let stats = run(&prefix, 20.0, 2.5, |requests, out| {
+        let nan_intent = WireIntent {
+            style: 0,
+            style_confidence: f32::NAN,
+            ..WireIntent::from_intent(&Default::default())
+        };
+        let r = next_request(requests, 0);
+        let mut bad = Vec::new();
+        // A parsed intent with a NaN confidence (the passenger's, then a road user's).
+        bad.push(WireAdvice {
+            ego_intent: nan_intent,
+            ..answer(&r)
+        });
+        let mut a = answer(&r);
+        a.n_agent_intents = 1;
+        a.agent_intents[0].intent = nan_intent;
+        bad.push(a);
+        // An intent code, a maneuver code and a count out of range; a confidence above 1.
+        let mut a = answer(&r);
+        a.ego_intent.task = 200;
+        bad.push(a);
+        bad.push(WireAdvice {
+            maneuver: 9,
+            ..answer(&r)
+        });
+        bad.push(WireAdvice {
+            n_agent_intents: WIRE_OBJECTS as u8 + 1,
+            ..answer(&r)
+        });
+        bad.push(WireAdvice {
+            confidence: 1.5,
+            ..answer(&r)
+        });
+        // A stamp from the future.
+        bad.push(WireAdvice {
+            published_ns: now_ns() + 60_000_000_000,
+            ..answer(&r)
+        });
+        // A failure report (a timeout) that carries a NaN intent as well.
+        bad.push(WireAdvice {
+            valid: 0,
+            maneuver: UNKNOWN,
+            ego_intent: nan_intent,
+            ..answer(&r)
+        });
+        for mut a in bad {
+            if a.published_ns == 0 {
+                a.published_ns = now_ns();
+            }
+            iox::send(out, &a).expect("send");
+            std::thread::sleep(Duration::from_millis(150));
+        }
+    });
+    let rejected: u64 = stats.frames_rejected.iter().sum();
+    assert_eq!(
+        rejected, 0,
+        "good scenes rejected after bad advice: {stats:?}"
+    );
+    assert!(stats.frames_accepted >= 35, "{stats:?}");
+    assert_eq!(stats.fallbacks[FallbackReason::StaleScene as usize], 0);
+    assert_eq!(stats.advice_verdicts[AdviceVerdict::Malformed as usize], 7);
+    assert_eq!(stats.advice_verdicts[AdviceVerdict::NoAdvice as usize], 1);
+    assert_eq!(stats.advice_failures[0], 1, "the timeout is counted");
+    assert_eq!(stats.advice_verdicts[AdviceVerdict::Accepted as usize], 0);
+}
+
+/// Three answers published 1 ms before their deadline, then three 1 ms after it.
+fn publish_around_the_deadline(rate_hz: f64) {
+    const MS: u64 = 1_000_000;
+    let prefix = format!("intake-deadline-{rate_hz}-{}/", std::process::id());
+    let stats = run(&prefix, rate_hz, 6.0, |requests, out| {
+        let mut after = 0;
+        for offset in [-1i64, -1, -1, 1, 1, 1] {
+            loop {
+                let r = next_request(requests, after);
+                after = r.issued_ns;
+                let target = r.deadline_ns.saturating_add_signed(offset * MS as i64);
+                if now_ns() + 5 * MS > target {
+                    continue; // too little time left to aim: take a newer request
+                }
+                std::thread::sleep(Duration::from_nanos(target - now_ns() - 2 * MS));
+                while now_ns() < target {
+                    std::hint::spin_loop();
+                }
+                let mut a = answer(&r);
+                a.published_ns = now_ns();
+                let margin = a.published_ns as i64 - r.deadline_ns as i64;
+                if offset < 0 && margin > -(MS as i64) / 2 {
+                    continue; // preempted past the aim: try again
+                }
+                iox::send(out, &a).expect("send");
+                // Let the core judge it before the next one.
+                std::thread::sleep(Duration::from_millis(200));
+                after = now_ns();
+                break;
+            }
+        }
+    });
+    let v = |x: AdviceVerdict| stats.advice_verdicts[x as usize];
+    assert_eq!(v(AdviceVerdict::Accepted), 3, "at {rate_hz} Hz: {stats:?}");
+    assert_eq!(v(AdviceVerdict::Late), 3, "at {rate_hz} Hz: {stats:?}");
+}
+
+#[test]
+fn an_answer_published_1_ms_before_its_deadline_is_accepted_at_20_hz_and_1_ms_after_never() {
+    publish_around_the_deadline(20.0);
+}
+
+#[test]
+fn an_answer_published_1_ms_before_its_deadline_is_accepted_at_50_hz_and_1_ms_after_never() {
+    publish_around_the_deadline(50.0);
+}
+
+#[test]
+fn an_answer_published_1_ms_before_its_deadline_is_accepted_at_100_hz_and_1_ms_after_never() {
+    publish_around_the_deadline(100.0);
+}
