@@ -783,3 +783,19 @@ fn fallback_samples_must_be_a_usable_count_and_later_plans_use_at_most_samples()
     assert!(p.validate().is_ok());
     assert_eq!(p.trajectory.later_samples(), 128);
 }
+
+#[test]
+fn every_advice_verdict_has_its_code_and_its_own_snake_case_name() {
+    let mut names = std::collections::BTreeSet::new();
+    for (code, v) in AdviceVerdict::ALL.iter().enumerate() {
+        assert_eq!(*v as usize, code);
+        assert_eq!(AdviceVerdict::try_from(code as u8), Ok(*v));
+        let name = v.name();
+        assert!(
+            !name.is_empty() && name.chars().all(|c| c.is_ascii_lowercase() || c == '_'),
+            "{v:?}: {name:?}"
+        );
+        assert!(names.insert(name), "{name} twice");
+    }
+    assert_eq!(AdviceVerdict::try_from(AdviceVerdict::ALL.len() as u8), Err(10));
+}
