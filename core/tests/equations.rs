@@ -307,6 +307,37 @@ fn eq16_gate_checks_in_order() {
         judge(Some(&advice(45, 0.9, 2.5)), 2.5, true, false),
         (None, AdviceVerdict::Unsafe)
     );
+    // Each bound is inclusive: confidence exactly 0.7, published exactly at the issue or the
+    // deadline, judged exactly at the deadline, P_n exactly `prune_below`.
+    let issued = 45.0 * 0.05;
+    let deadline = issued + p.deadline_s;
+    let accepted = AdviceVerdict::Accepted;
+    assert_eq!(verdict(&advice(45, p.confidence_min, 2.5), 2.5), accepted);
+    assert_eq!(verdict(&advice(45, 0.9, issued), 2.5), accepted);
+    assert_eq!(verdict(&advice(45, 0.9, deadline), 3.9), accepted);
+    assert_eq!(
+        verdict(&advice(45, 0.9, 3.0), 3.0),
+        accepted,
+        "published at now"
+    );
+    assert_eq!(
+        judge(Some(&advice(45, 0.9, 3.0)), deadline, false, true).1,
+        accepted,
+        "judged again exactly at the deadline"
+    );
+    let at_the_bound = Advice {
+        maneuver: Maneuver::KeepSpeed,
+        ..advice(45, 0.9, 2.5)
+    };
+    let pc_bound = [0.2, 0.05, p.prune_below, 0.25, 0.25];
+    let g = GateContext {
+        log: &log,
+        route: Turn::Left,
+        now: 2.5,
+        first_look: true,
+        p_corrected: &pc_bound,
+    };
+    assert_eq!(gate(Some(&at_the_bound), &g, &p, |_| true).1, accepted);
     // Accepted advice applies until its request's deadline (3.75 s), then expires; the first
     // cycle to see it judges it even after the deadline.
     let a = advice(45, 0.9, 3.7);
@@ -797,5 +828,23 @@ fn every_advice_verdict_has_its_code_and_its_own_snake_case_name() {
         );
         assert!(names.insert(name), "{name} twice");
     }
-    assert_eq!(AdviceVerdict::try_from(AdviceVerdict::ALL.len() as u8), Err(10));
+    assert_eq!(
+        AdviceVerdict::try_from(AdviceVerdict::ALL.len() as u8),
+        Err(10)
+    );
+}
+
+#[test]
+fn only_decelerate_gives_way_and_only_a_turn_against_the_route_is_inconsistent() {
+    for m in Maneuver::ALL {
+        assert_eq!(m.gives_way(), m == Maneuver::Decelerate, "{m:?}");
+        for route in [Turn::Straight, Turn::Left, Turn::Right] {
+            let against = matches!(
+                (m, route),
+                (Maneuver::TurnLeft, Turn::Straight | Turn::Right)
+                    | (Maneuver::TurnRight, Turn::Straight | Turn::Left)
+            );
+            assert_eq!(m.consistent_with(route), !against, "{m:?} on {route:?}");
+        }
+    }
 }
