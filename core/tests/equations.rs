@@ -220,6 +220,31 @@ fn profile_arrival_times() {
         stop_m: 4.0,
     };
     assert!(stop.arrival_time(4.0, 5.0).is_infinite());
+    // Up to the stop point it is reached: exactly at 4 m after 2 s.
+    assert!((stop.arrival_time(4.0, 4.0) - 2.0).abs() < 1e-6);
+    // From 2 m/s at 1 m/s² to 6 m/s (4 s, 16 m): 10 m while accelerating, 2t + t²/2 = 10, and
+    // 26 m after 4 s + 10 m at 6 m/s.
+    let rolling = Profile {
+        accel: 1.0,
+        target_speed: 6.0,
+        duration: 3.0,
+        stop_m: f64::INFINITY,
+    };
+    assert!((rolling.arrival_time(2.0, 10.0) - (24f64.sqrt() - 2.0)).abs() < EPS);
+    assert!((rolling.arrival_time(2.0, 26.0) - (4.0 + 10.0 / 6.0)).abs() < EPS);
+    // Standing and not accelerating, it never arrives.
+    assert!(keep.arrival_time(0.0, 5.0).is_infinite());
+}
+
+#[test]
+fn maneuver_names_are_distinct_snake_case() {
+    let names: std::collections::BTreeSet<_> = Maneuver::ALL.iter().map(|m| m.name()).collect();
+    assert_eq!(names.len(), Maneuver::ALL.len());
+    for (i, m) in Maneuver::ALL.iter().enumerate() {
+        assert_eq!(m.index(), i);
+        assert!(m.name().chars().all(|c| c.is_ascii_lowercase() || c == '_'), "{m:?}");
+    }
+    assert_eq!(Maneuver::Accelerate.name(), "accelerate");
 }
 
 #[test]
