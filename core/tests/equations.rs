@@ -193,6 +193,39 @@ fn idm_penalty_input_free_road_and_close_leader() {
     assert!((idm_accel(0.0, 1e6, 0.0, &p) - p.idm_max_accel_mps2).abs() < 1e-6);
     // Fast and closing on a near leader: strong braking.
     assert!(idm_accel(10.0, 5.0, 5.0, &p) < -5.0);
+    // At the desired speed on a free road: none; above it, braking.
+    assert!(idm_accel(p.desired_speed_mps, f64::INFINITY, 0.0, &p).abs() < 1e-3);
+    assert!(idm_accel(1.2 * p.desired_speed_mps, f64::INFINITY, 0.0, &p) < -1.0);
+}
+
+#[test]
+fn a_proceeding_road_user_enters_when_accelerating_and_leaves_at_its_slowest() {
+    let ip = concord_core::params::InteractionParams::default();
+    // From 2 m/s at `proceed_accel_mps2` (1.5) towards 14 m/s: 10 m take
+    // (−2 + √(4 + 2·1.5·10)) / 1.5 s; it leaves 20 m away at the latest at 2 m/s, after 10 s.
+    let c = concord_core::opm::ConflictPair {
+        agent_speed_mps: 2.0,
+        agent_pass_m: [10.0, 20.0],
+        ..Default::default()
+    };
+    let (t_in, t_out) = concord_core::choice::proceeding_interval(&c, &ip);
+    assert!((t_in - (34f64.sqrt() - 2.0) / 1.5).abs() < EPS, "{t_in}");
+    assert!((t_out - 10.0).abs() < EPS, "{t_out}");
+    // Already at the top speed, 100 m ahead: 100 / 14 s.
+    let fast = concord_core::opm::ConflictPair {
+        agent_speed_mps: 14.0,
+        agent_pass_m: [100.0, 110.0],
+        ..c
+    };
+    let (t_in, _) = concord_core::choice::proceeding_interval(&fast, &ip);
+    assert!((t_in - 100.0 / 14.0).abs() < EPS, "{t_in}");
+    // Past the ramp: 8 s to reach 14 m/s over 64 m, then 36 m at 14 m/s.
+    let long = concord_core::opm::ConflictPair {
+        agent_pass_m: [100.0, 110.0],
+        ..c
+    };
+    let (t_in, _) = concord_core::choice::proceeding_interval(&long, &ip);
+    assert!((t_in - (8.0 + 36.0 / 14.0)).abs() < EPS, "{t_in}");
 }
 
 #[test]
@@ -871,5 +904,23 @@ fn only_decelerate_gives_way_and_only_a_turn_against_the_route_is_inconsistent()
             );
             assert_eq!(m.consistent_with(route), !against, "{m:?} on {route:?}");
         }
+    }
+}
+
+#[test]
+fn a_car_ahead_in_the_lane_corridor_is_the_leader_also_off_centre() {
+    // 12 m ahead on the ego's lane, 1.5 m off its centre line (within half a lane width plus
+    // 0.5 m): the car-following leader. 4 m off centre: not in the corridor.
+    for (offset, leads) in [(0.0, true), (1.5, true), (4.0, false)] {
+        let mut core = paper_core(Params::default());
+        let mut scene = paper_scene(0.0, 8.0, 8.0);
+        scene.push(AgentState::moving(
+            2,
+            Vec2::new(28.0, 5.0 + offset),
+            core::f64::consts::PI,
+            8.0,
+        ));
+        core.step(&scene, 0.0, None).unwrap();
+        assert_eq!(core.triplet().leader.is_some(), leads, "offset {offset} m");
     }
 }
