@@ -275,7 +275,10 @@ fn maneuver_names_are_distinct_snake_case() {
     assert_eq!(names.len(), Maneuver::ALL.len());
     for (i, m) in Maneuver::ALL.iter().enumerate() {
         assert_eq!(m.index(), i);
-        assert!(m.name().chars().all(|c| c.is_ascii_lowercase() || c == '_'), "{m:?}");
+        assert!(
+            m.name().chars().all(|c| c.is_ascii_lowercase() || c == '_'),
+            "{m:?}"
+        );
     }
     assert_eq!(Maneuver::Accelerate.name(), "accelerate");
 }
@@ -923,4 +926,46 @@ fn a_car_ahead_in_the_lane_corridor_is_the_leader_also_off_centre() {
         core.step(&scene, 0.0, None).unwrap();
         assert_eq!(core.triplet().leader.is_some(), leads, "offset {offset} m");
     }
+}
+
+#[test]
+fn decelerate_stops_at_the_yield_point_braking_at_v0_squared_over_2d() {
+    // 10 m/s, 20 m to the yield point: faster than the approach speed 2(√21 − 1) m/s, so one
+    // stopping polynomial: −v0²/(2d) = −2.5 m/s² over T = 2d/v0 = 4 s.
+    let ctx = concord_core::choice::EgoContext {
+        speed: 10.0,
+        speed_cap: 13.9,
+        yield_distance: 20.0,
+        goal_distance: 100.0,
+        max_brake: 5.0,
+        min_duration: 1.0,
+        max_duration: 6.0,
+        yield_check_s: 1.0,
+        ..Default::default()
+    };
+    let p = ChoiceParams::default();
+    let d = concord_core::choice::profile(Maneuver::Decelerate, &ctx, &p);
+    assert!((d.accel + 2.5).abs() < EPS, "{d:?}");
+    assert!((d.duration - 4.0).abs() < EPS && d.stop_m == 20.0 && d.target_speed == 0.0);
+}
+
+#[test]
+fn a_road_user_stating_it_proceeds_adds_its_gain_to_the_safety_preference() {
+    use concord_core::scene::{IntentAction, Rated};
+    let mut core = paper_core(Params::default());
+    core.step(&paper_scene(0.0, 8.0, 8.0), 0.0, None).unwrap();
+    let plain = core.choice().safety_preference;
+    let mut core = paper_core(Params::default());
+    let mut scene = paper_scene(0.0, 8.0, 8.0);
+    scene.agents[0].intent.action = Some(Rated {
+        value: IntentAction::Proceed,
+        confidence: 0.9,
+    });
+    core.step(&scene, 0.0, None).unwrap();
+    let gain = ChoiceParams::default().other_proceeds_safety;
+    assert!(
+        (core.choice().safety_preference - (plain + gain)).abs() < EPS,
+        "{plain} + {gain} != {}",
+        core.choice().safety_preference
+    );
 }
