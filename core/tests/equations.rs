@@ -969,3 +969,24 @@ fn a_road_user_stating_it_proceeds_adds_its_gain_to_the_safety_preference() {
         core.choice().safety_preference
     );
 }
+
+#[test]
+fn eq13_state_features_of_an_empty_scene() {
+    // Speed over the reference minus 1, acceleration over 3, and with nothing around: the
+    // ΔTTC, conflict and leader terms at their caps, no risky conflict.
+    let ctx = concord_core::choice::EgoContext {
+        speed: 8.0,
+        accel: 1.5,
+        ..Default::default()
+    };
+    let f = concord_core::choice::state_features(
+        &Default::default(),
+        &ctx,
+        &OpmParams::default(),
+        &ChoiceParams::default(),
+    );
+    let expected = [8.0 / 10.0 - 1.0, 0.5, 0.5, 1.0, 1.0, -0.5];
+    for (k, (a, b)) in f.iter().zip(expected).enumerate() {
+        assert!((a - b).abs() < EPS, "feature {k}: {a} != {b}");
+    }
+}
