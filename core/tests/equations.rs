@@ -990,3 +990,38 @@ fn eq13_state_features_of_an_empty_scene() {
         assert!((a - b).abs() < EPS, "feature {k}: {a} != {b}");
     }
 }
+
+#[test]
+fn through_the_turn_the_plan_keeps_the_lateral_acceleration_limit() {
+    // Approaching the left turn fast, the plan slows for the curve: v²κ, with κ from the
+    // heading change of the planned points, stays within `max_lateral_accel_mps2` (10 %).
+    let p = Params::default();
+    for (x, v) in [(30.0, 12.0), (40.0, 13.0), (25.0, 10.0)] {
+        let mut core = paper_core(p);
+        let ego = AgentState::moving(0, Vec2::new(x, 5.0), core::f64::consts::PI, v);
+        let scene = concord_core::Scene::new(0.0, ego, paper::CAV_LEFT);
+        let d = core.step(&scene, 0.0, None).unwrap();
+        assert_ne!(
+            d.source,
+            concord_core::DecisionSource::MinimumRisk,
+            "x {x}, v {v}"
+        );
+        let pts = d.trajectory.points();
+        let mut worst: f64 = 0.0;
+        for w in pts.windows(3) {
+            let ds = w[2].s - w[0].s;
+            if ds < 0.5 {
+                continue;
+            }
+            let dh = (w[2].heading - w[0].heading + core::f64::consts::PI)
+                .rem_euclid(2.0 * core::f64::consts::PI)
+                - core::f64::consts::PI;
+            let lateral = w[1].speed * w[1].speed * dh.abs() / ds;
+            worst = worst.max(lateral);
+        }
+        assert!(
+            worst <= p.trajectory.max_lateral_accel_mps2 * 1.1,
+            "x {x}, v {v}: {worst}"
+        );
+    }
+}
