@@ -22,10 +22,7 @@ use concord_core::{DecisionCore, Params};
 use concord_ipc::clock::now_ns;
 use concord_ipc::core_service::{self, Geometry, RunConfig, ServiceConfig, StopAfter};
 use concord_ipc::system::RealtimeConfig;
-use concord_ipc::wire::{
-    FrameReject, IntentText, SceneFrame, TextSource, WireAdvice, WireAgentIntent, WireIntent,
-    WIRE_OBJECTS,
-};
+use concord_ipc::wire::{FrameReject, IntentText, SceneFrame, TextSource, WireAdvice};
 use concord_ipc::{iox, services};
 use concord_sidecar::config::SidecarConfig;
 use concord_sidecar::ledger::Ledger;
@@ -34,7 +31,11 @@ use rand::rngs::SmallRng;
 
 #[path = "support/toml_paths.rs"]
 mod toml_paths;
+#[path = "support/wire_samples.rs"]
+mod wire_samples;
+
 use rand::{Rng, RngCore, SeedableRng};
+use wire_samples::known_intent;
 
 /// Byte patterns per message type.
 const SCENES: usize = 400_000;
@@ -103,18 +104,6 @@ fn mutate(good: &[u8], rng: &mut SmallRng) -> Vec<u8> {
     b
 }
 
-fn known_intent() -> WireIntent {
-    WireIntent {
-        style_confidence: 0.8,
-        action_confidence: 0.8,
-        task_confidence: 0.8,
-        style: 1,
-        action: 0,
-        task: 0,
-        reserved: 0,
-    }
-}
-
 /// The paper's junction with four road users and known intents.
 fn good_frame(sequence: u64, stamp_ns: u64) -> SceneFrame {
     let ego = AgentState::moving(0, Vec2::new(40.0, 5.0), std::f64::consts::PI, 8.0);
@@ -132,22 +121,7 @@ fn good_frame(sequence: u64, stamp_ns: u64) -> SceneFrame {
 }
 
 fn good_advice(request_id: u64, published_ns: u64) -> WireAdvice {
-    WireAdvice {
-        request_id,
-        published_ns,
-        confidence: 0.9,
-        ego_intent: known_intent(),
-        agent_intents: [WireAgentIntent {
-            intent: known_intent(),
-            agent_id: 1,
-            reserved: [0; 4],
-        }; WIRE_OBJECTS],
-        maneuver: 1,
-        valid: 1,
-        n_agent_intents: 3,
-        failure: 0,
-        reserved: [0; 4],
-    }
+    wire_samples::advice(request_id, published_ns, 3)
 }
 
 fn paper_core() -> DecisionCore {

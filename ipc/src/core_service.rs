@@ -15,7 +15,7 @@ use std::io::Write as _;
 use std::time::Duration;
 
 use concord_core::negotiation::Phase;
-use concord_core::scene::{ExplicitIntent, Scene, SceneErrorKind};
+use concord_core::scene::{Scene, SceneErrorKind};
 use concord_core::{Advice, AdviceVerdict, DecisionCore, FallbackReason, Params};
 use hdrhistogram::Histogram;
 use iceoryx2::config::Config;
@@ -28,8 +28,8 @@ use crate::iox::{self, IpcError};
 use crate::services;
 use crate::system::{apply_realtime, Notifier, RealtimeConfig};
 use crate::wire::{
-    AdviceFailure, AdviceRequest, CoreStats, FrameReject, Percentiles, SceneFrame, WireAdvice,
-    WireDecision, WIRE_OBJECTS,
+    AdviceFailure, AdviceRequest, CheckedAdvice, CoreStats, FrameReject, Percentiles, SceneFrame,
+    WireAdvice, WireDecision,
 };
 
 /// Which built-in geometry the core uses.
@@ -188,31 +188,18 @@ pub struct StopAfter {
     pub duration_s: Option<f64>,
 }
 
-/// Intents the sidecar parsed from language (eq. 8), held until `expires_ns`.
+/// The intents of the last valid advice (eq. 8), held until `expires_ns`.
 #[derive(Clone, Copy, Default)]
 struct LanguageIntents {
-    ego: ExplicitIntent,
-    agents: [(u32, ExplicitIntent); WIRE_OBJECTS],
-    n_agents: usize,
+    from: Option<CheckedAdvice>,
     expires_ns: u64,
 }
 
 impl LanguageIntents {
-    /// Merges the held intents into `scene`, each dimension keeping the more confident parse;
-    /// weak ones are ignored later by the core's threshold.
+    /// Merges the held intents into `scene` until they expire.
     fn apply(&self, scene: &mut Scene, now_ns: u64) {
-        if now_ns >= self.expires_ns {
-            return;
-        }
-        scene.ego.intent = scene.ego.intent.merged_with(&self.ego);
-        let n = scene.n_agents;
-        for agent in scene.agents[..n].iter_mut() {
-            if let Some((_, i)) = self.agents[..self.n_agents]
-                .iter()
-                .find(|(id, _)| *id == agent.id)
-            {
-                agent.intent = agent.intent.merged_with(i);
-            }
+        if let Some(c) = self.from.filter(|_| now_ns < self.expires_ns) {
+            c.merge_intents_into(scene);
         }
     }
 }
@@ -435,9 +422,7 @@ impl Loop<'_> {
         match a.check(now) {
             Ok(Some(c)) => {
                 self.intents = LanguageIntents {
-                    ego: c.ego,
-                    agents: c.agents,
-                    n_agents: c.n_agents,
+                    from: Some(c),
                     expires_ns: now.saturating_add((self.cfg.intent_hold_s * 1e9) as u64),
                 };
                 self.advice = Some(c.advice);

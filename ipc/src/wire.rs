@@ -619,6 +619,23 @@ pub struct CheckedAdvice {
     pub n_agents: usize,
 }
 
+impl CheckedAdvice {
+    /// Merges the intents into `scene`, each dimension keeping the more confident parse; weak
+    /// ones are ignored later by the core's threshold.
+    pub fn merge_intents_into(&self, scene: &mut Scene) {
+        scene.ego.intent = scene.ego.intent.merged_with(&self.ego);
+        let n = scene.n_agents;
+        for agent in scene.agents[..n].iter_mut() {
+            if let Some((_, i)) = self.agents[..self.n_agents]
+                .iter()
+                .find(|(id, _)| *id == agent.id)
+            {
+                agent.intent = agent.intent.merged_with(i);
+            }
+        }
+    }
+}
+
 impl WireAdvice {
     /// The advice, checked as a scene frame is: every code known, every confidence finite and
     /// in [0, 1], at most [`WIRE_OBJECTS`] intents, and a publish stamp no later than its

@@ -6,10 +6,14 @@ use concord_core::scene::{paper, AgentState, Scene, Vec2};
 use concord_core::DecisionCore;
 use concord_ipc::clock::now_ns;
 use concord_ipc::core_service::RunConfig;
-use concord_ipc::wire::{SceneFrame, WireAdvice, WireAgent, WireAgentIntent, WireIntent};
+use concord_ipc::wire::{SceneFrame, WireAdvice, WireAgent, WireIntent};
 
 #[path = "../../tests/support/toml_paths.rs"]
 mod toml_paths;
+#[path = "../../tests/support/wire_samples.rs"]
+mod wire_samples;
+
+use wire_samples::known_intent;
 
 const BAD: [f64; 4] = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300];
 
@@ -42,19 +46,6 @@ const INTENT_FIELDS: [(&str, SetIntent); 3] = [
     ("action_confidence", |i, v| i.action_confidence = v as f32),
     ("task_confidence", |i, v| i.task_confidence = v as f32),
 ];
-
-/// An intent with every dimension known, so every confidence is read.
-fn known_intent() -> WireIntent {
-    WireIntent {
-        style_confidence: 0.5,
-        action_confidence: 0.5,
-        task_confidence: 0.5,
-        style: 0,
-        action: 0,
-        task: 0,
-        reserved: 0,
-    }
-}
 
 fn good_frame(sequence: u64) -> SceneFrame {
     let ego = AgentState::moving(0, Vec2::new(40.0, 5.0), std::f64::consts::PI, 8.0);
@@ -103,22 +94,7 @@ fn every_float_of_a_scene_frame_is_checked() {
 }
 
 fn good_advice() -> WireAdvice {
-    WireAdvice {
-        request_id: 1,
-        published_ns: 1,
-        confidence: 0.9,
-        ego_intent: known_intent(),
-        agent_intents: [WireAgentIntent {
-            intent: known_intent(),
-            agent_id: 1,
-            reserved: [0; 4],
-        }; concord_ipc::wire::WIRE_OBJECTS],
-        maneuver: 1,
-        valid: 1,
-        n_agent_intents: concord_ipc::wire::WIRE_OBJECTS as u8,
-        failure: 0,
-        reserved: [0; 4],
-    }
+    wire_samples::advice(1, 1, concord_ipc::wire::WIRE_OBJECTS as u8)
 }
 
 #[test]

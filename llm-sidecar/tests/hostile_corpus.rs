@@ -141,15 +141,7 @@ fn judge(a: &WireAdvice) -> (Decision, bool) {
         .expect("a well-formed advice")
         .expect("valid");
     scene.time_s += 0.05;
-    scene.ego.intent = scene.ego.intent.merged_with(&c.ego);
-    for agent in scene.agents.iter_mut().take(scene.n_agents) {
-        if let Some((_, i)) = c.agents[..c.n_agents]
-            .iter()
-            .find(|(id, _)| *id == agent.id)
-        {
-            agent.intent = agent.intent.merged_with(i);
-        }
-    }
+    c.merge_intents_into(&mut scene);
     let advice = Advice {
         request_id: first.cycle,
         published_at_s: scene.time_s - 0.01,
