@@ -807,9 +807,10 @@ fn demo(speed: f64, duration: f64, iox_path: Option<&Path>) -> Result<(), String
                 }
             }
             println!(
-                "advice: {} requests, {} answers in; accepted {}, rejected:{}; sidecar failures:{}",
+                "advice: {} requests, {} answers in ({} superseded before a decision); accepted {}, rejected:{}; sidecar failures:{}",
                 s.advice_requests,
                 s.advice_received,
+                s.advice_superseded,
                 s.advice_verdicts[AdviceVerdict::Accepted as usize],
                 if rejected.is_empty() {
                     " none"

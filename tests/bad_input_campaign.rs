@@ -301,14 +301,21 @@ fn a_running_core_counts_every_bad_frame_and_decides_the_good_ones_after() {
     );
     let rejected: u64 = stats.frames_rejected.iter().sum();
     eprintln!(
-        "core process: {} frames in, {} superseded, {} decided, rejected {:?} (bad code, not finite, out of range, duplicate, out of order), {} restarts; advice {} in, verdicts {:?}",
+        "core process: {} frames in, {} superseded, {} decided, rejected {:?} (bad code, not finite, out of range, duplicate, out of order), {} restarts; advice {} in, verdicts {:?}, {} superseded, {} pending",
         stats.frames_received,
         stats.frames_superseded,
         stats.frames_accepted,
         stats.frames_rejected,
         stats.publisher_restarts,
         stats.advice_received,
-        stats.advice_verdicts
+        stats.advice_verdicts,
+        stats.advice_superseded,
+        stats.advice_pending
+    );
+    assert_eq!(
+        stats.advice_received,
+        stats.advice_verdicts.iter().sum::<u64>() + stats.advice_superseded + stats.advice_pending,
+        "every advice is judged, superseded or pending"
     );
     assert_eq!(
         stats.frames_received,

@@ -313,7 +313,11 @@ fn soak_feed_core_with_faults_and_a_crashed_publisher() {
     }
     let valid_verdicts: u64 = s.advice_verdicts.iter().skip(1).sum();
     assert!(valid_verdicts > 0, "no answer was weighed by the gate");
-    assert!(s.advice_received >= s.advice_verdicts.iter().sum::<u64>());
+    assert_eq!(
+        s.advice_received,
+        s.advice_verdicts.iter().sum::<u64>() + s.advice_superseded + s.advice_pending,
+        "every advice is judged, superseded or pending"
+    );
     assert!(
         s.decisions[DecisionSource::Advice as usize] > 0,
         "confident safe advice was never applied"

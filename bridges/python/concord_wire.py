@@ -43,6 +43,17 @@ ACTIONS = ("yield", "proceed", "accelerate", "decelerate", "turn_left", "turn_ri
 TASKS = ("commute", "emergency", "official", "leisure")
 # FrameReject codes: the index into CoreStats.frames_rejected.
 FRAME_REJECTS = ("bad_code", "not_finite", "out_of_range", "duplicate", "out_of_order")
+# AdviceFailure codes: the index into CoreStats.advice_failures.
+ADVICE_FAILURES = ("timeout", "connection", "http_status", "malformed", "schema_violation")
+
+# Each name tuple above and the Rust enum whose codes it names (checked by test_wire_layout).
+CODE_NAMES = {
+    "Maneuver": MANEUVERS, "DecisionSource": SOURCES, "FallbackReason": FALLBACKS,
+    "AdviceVerdict": ADVICE_VERDICTS, "AdviceFailure": ADVICE_FAILURES,
+    "Announcement": ANNOUNCEMENTS, "Phase": NEGOTIATION_PHASES, "AgentKind": AGENT_KINDS,
+    "TurnSignal": TURN_SIGNALS, "Style": STYLES, "IntentAction": ACTIONS, "Task": TASKS,
+    "FrameReject": FRAME_REJECTS,
+}
 
 
 def service_name(service, prefix=DEFAULT_PREFIX):
@@ -277,14 +288,16 @@ class CoreStats(_Wire):
         ("frames_received", ctypes.c_uint64),
         ("frames_superseded", ctypes.c_uint64),
         ("frames_accepted", ctypes.c_uint64),
-        ("frames_rejected", ctypes.c_uint64 * 5),
+        ("frames_rejected", ctypes.c_uint64 * len(FRAME_REJECTS)),
         ("publisher_restarts", ctypes.c_uint64),
-        ("decisions", ctypes.c_uint64 * 3),
-        ("fallbacks", ctypes.c_uint64 * 4),
+        ("decisions", ctypes.c_uint64 * len(SOURCES)),
+        ("fallbacks", ctypes.c_uint64 * len(FALLBACKS)),
         ("advice_requests", ctypes.c_uint64),
         ("advice_received", ctypes.c_uint64),
-        ("advice_verdicts", ctypes.c_uint64 * 10),
-        ("advice_failures", ctypes.c_uint64 * 5),
+        ("advice_verdicts", ctypes.c_uint64 * len(ADVICE_VERDICTS)),
+        ("advice_superseded", ctypes.c_uint64),
+        ("advice_pending", ctypes.c_uint64),
+        ("advice_failures", ctypes.c_uint64 * len(ADVICE_FAILURES)),
         ("courtesy_rejects", ctypes.c_uint64),
         ("deadlock_announcements", ctypes.c_uint64),
         ("cycle_ns", ctypes.c_uint64 * 5),

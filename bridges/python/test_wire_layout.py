@@ -1,5 +1,5 @@
 """The ctypes mirror matches the Rust wire types: size, alignment, type name, field offsets and
-field types.
+field types; and its name tuples name the Rust enums' codes in order.
 
 Runs `cargo run -p concord-ipc --example wire_layout` for the Rust side, or reads the JSON it
 prints from $CONCORD_WIRE_LAYOUT.
@@ -51,7 +51,9 @@ def rust_layout():
 class WireLayout(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        cls.rust = rust_layout()
+        layout = rust_layout()
+        cls.rust = layout["types"]
+        cls.names = layout["names"]
 
     def test_every_rust_type_has_a_mirror_and_back(self):
         self.assertEqual(sorted(self.rust), sorted(t.__name__ for t in wire.ALL_TYPES))
@@ -75,6 +77,12 @@ class WireLayout(unittest.TestCase):
                     self.assertIn(name, rust, f"{ty.__name__}.{name} is not a Rust field")
                     self.assertEqual(rust_type(ctype), rust[name]["type"],
                                      f"type of {ty.__name__}.{name}")
+
+    def test_code_names_match(self):
+        self.assertEqual(sorted(self.names), sorted(wire.CODE_NAMES))
+        for rust_enum, names in wire.CODE_NAMES.items():
+            with self.subTest(enum=rust_enum):
+                self.assertEqual(list(names), self.names[rust_enum])
 
     def test_text_round_trip_cuts_at_a_character_boundary(self):
         m = wire.IntentText()

@@ -1,8 +1,13 @@
-//! Prints the size, alignment, type name and field offsets and types of every wire type as JSON,
-//! for the layout test of the Python mirror (`bridges/python/test_wire_layout.py`).
+//! Prints the size, alignment, type name and field offsets and types of every wire type, and the
+//! names of the codes of every enum the wire carries, as JSON, for the layout test of the Python
+//! mirror (`bridges/python/test_wire_layout.py`).
 
+use concord_core::negotiation::Phase;
+use concord_core::scene::{AgentKind, IntentAction, Style, Task, TurnSignal};
+use concord_core::{AdviceVerdict, Announcement, DecisionSource, FallbackReason, Maneuver};
 use concord_ipc::wire::*;
 use iceoryx2::prelude::ZeroCopySend;
+use std::fmt::Debug;
 use std::mem::{align_of, offset_of, size_of};
 
 /// The type of the field `field` selects, e.g. `type_of(|s: &WireAgent| &s.x)` is `f64`.
@@ -28,6 +33,33 @@ fn short(name: &str) -> String {
         rest = &rest[c.len_utf8()..];
     }
     out
+}
+
+/// A JSON array of names.
+fn json_list<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
+    let quoted: Vec<String> = names.into_iter().map(|n| format!("\"{n}\"")).collect();
+    format!("[{}]", quoted.join(", "))
+}
+
+/// snake_case of a variant's name: `NoFeasibleTrajectory` -> `no_feasible_trajectory`.
+fn snake(camel: &str) -> String {
+    let mut out = String::new();
+    for (i, c) in camel.char_indices() {
+        if c.is_uppercase() && i > 0 {
+            out.push('_');
+        }
+        out.extend(c.to_lowercase());
+    }
+    out
+}
+
+/// The names of codes 0, 1, … of a wire enum, up to the first unknown code.
+fn code_names<E: TryFrom<u8> + Debug>() -> String {
+    let names: Vec<String> = (0..=u8::MAX)
+        .map_while(|code| E::try_from(code).ok())
+        .map(|v| snake(&format!("{v:?}")))
+        .collect();
+    json_list(names.iter().map(String::as_str))
 }
 
 macro_rules! layout {
@@ -217,6 +249,8 @@ fn main() {
             advice_requests,
             advice_received,
             advice_verdicts,
+            advice_superseded,
+            advice_pending,
             advice_failures,
             courtesy_rejects,
             deadlock_announcements,
@@ -225,5 +259,34 @@ fn main() {
             decide_ns
         }),
     ];
-    println!("{{{}}}", entries.join(",\n"));
+    let names = [
+        ("Maneuver", json_list(Maneuver::ALL.map(Maneuver::name))),
+        ("DecisionSource", code_names::<DecisionSource>()),
+        ("FallbackReason", code_names::<FallbackReason>()),
+        (
+            "AdviceVerdict",
+            json_list(AdviceVerdict::ALL.map(AdviceVerdict::name)),
+        ),
+        (
+            "AdviceFailure",
+            json_list(AdviceFailure::ALL.map(AdviceFailure::name)),
+        ),
+        ("Announcement", code_names::<Announcement>()),
+        ("Phase", code_names::<Phase>()),
+        ("AgentKind", code_names::<AgentKind>()),
+        ("TurnSignal", code_names::<TurnSignal>()),
+        ("Style", code_names::<Style>()),
+        ("IntentAction", code_names::<IntentAction>()),
+        ("Task", code_names::<Task>()),
+        (
+            "FrameReject",
+            json_list(FrameReject::ALL.map(FrameReject::name)),
+        ),
+    ]
+    .map(|(name, list)| format!("\"{name}\": {list}"));
+    println!(
+        "{{\"types\": {{{}}},\n\"names\": {{{}}}}}",
+        entries.join(",\n"),
+        names.join(",\n")
+    );
 }

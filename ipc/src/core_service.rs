@@ -254,7 +254,6 @@ struct Loop<'a> {
     last_sequence: u64,
     last_stamp_ns: u64,
     advice: Option<Advice>,
-    advice_unjudged: bool,
     intents: LanguageIntents,
     /// Negotiation phase of the last decision published.
     last_phase: Phase,
@@ -323,7 +322,6 @@ pub fn run_observed(
         last_sequence: 0,
         last_stamp_ns: 0,
         advice: None,
-        advice_unjudged: false,
         intents: LanguageIntents::default(),
         last_phase: Phase::Idle,
         decisions_since_request: 0,
@@ -381,6 +379,7 @@ impl Loop<'_> {
 
         let (advice, n) = iox::newest(&self.ports.advice)?;
         self.stats.advice_received += n;
+        self.stats.advice_superseded += n.saturating_sub(1);
         if let Some(a) = advice {
             self.take_advice(&a, t0);
         }
@@ -426,7 +425,8 @@ impl Loop<'_> {
                     expires_ns: now.saturating_add((self.cfg.intent_hold_s * 1e9) as u64),
                 };
                 self.advice = Some(c.advice);
-                self.advice_unjudged = true;
+                self.stats.advice_superseded += self.stats.advice_pending;
+                self.stats.advice_pending = 1;
             }
             Ok(None) => {
                 self.stats.advice_verdicts[AdviceVerdict::NoAdvice as usize] += 1;
@@ -481,9 +481,9 @@ impl Loop<'_> {
         self.last_valid_rx_ns = Some(rx);
         self.last_sequence = f.sequence;
         self.last_stamp_ns = f.stamp_ns;
-        if self.advice_unjudged {
+        if self.stats.advice_pending == 1 {
             self.stats.advice_verdicts[decision.advice as usize] += 1;
-            self.advice_unjudged = false;
+            self.stats.advice_pending = 0;
         }
         self.publish_decision(&decision, compute);
         self.decide.record(now_ns() - rx);
@@ -620,6 +620,11 @@ pub fn render_stats(s: &CoreStats, out: &mut impl std::fmt::Write) {
             let _ = write!(out, " {}={}", v.name(), s.advice_verdicts[v as usize]);
         }
     }
+    let _ = write!(
+        out,
+        " superseded={} pending={}",
+        s.advice_superseded, s.advice_pending
+    );
     if s.advice_failures.iter().any(|&n| n > 0) {
         let _ = write!(out, " | sidecar failures:");
         for f in AdviceFailure::ALL {

@@ -940,10 +940,16 @@ pub struct CoreStats {
     /// Decisions by `FallbackReason` code.
     pub fallbacks: [u64; FALLBACKS],
     pub advice_requests: u64,
+    /// Samples taken from `advice`. Each is counted once more: under a verdict, as superseded,
+    /// or as pending: `advice_received = Σ advice_verdicts + advice_superseded + advice_pending`.
     pub advice_received: u64,
     /// Each received advice by the verdict of the first decision that weighed it
-    /// (`AdviceVerdict` code).
+    /// (`AdviceVerdict` code); malformed advice and failure reports when taken.
     pub advice_verdicts: [u64; VERDICTS],
+    /// Advice replaced by a newer one before any decision weighed it (newest wins).
+    pub advice_superseded: u64,
+    /// 1 while a valid advice waits for its first decision, else 0.
+    pub advice_pending: u64,
     /// Requests the sidecar reported it could not answer, by [`AdviceFailure`] code.
     pub advice_failures: [u64; 5],
     /// Maneuvers refused for courtesy (they would make another road user brake harder than

@@ -1,14 +1,15 @@
 //! What the core process does with the advice it receives, over real iceoryx2 services: a
 //! malformed advice or a failure report installs nothing (the scenes after it are decided as
 //! before), and the deadline is judged by the advice's publish stamp, to the millisecond, at
-//! 20, 50 and 100 Hz. A test thread plays the sidecar.
+//! 20, 50 and 100 Hz; the intents a valid advice carries reach the core's scenes until they
+//! expire; every advice received is counted once. A test thread plays the sidecar.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use concord_core::scene::{paper, AgentState, Scene, Vec2};
+use concord_core::scene::{paper, AgentState, IntentAction, Scene, Task, Vec2};
 use concord_core::{AdviceVerdict, DecisionCore, FallbackReason, Maneuver, Params};
 use concord_ipc::clock::now_ns;
 use concord_ipc::core_service::{self, ServiceConfig, StopAfter};
@@ -26,8 +27,12 @@ use iceoryx2::prelude::*;
 type Requests = Subscriber<ipc::Service, AdviceRequest, ()>;
 type AdviceOut = Publisher<ipc::Service, WireAdvice, ()>;
 
-/// Publishes the ego alone on the paper's approach at 20 Hz until `stop`.
-fn feeder(prefix: String, config: Config, stop: Arc<AtomicBool>) -> JoinHandle<()> {
+/// Track id of the road user the feeder adds with `hdv`.
+const HDV: u32 = 7;
+
+/// Publishes the ego on the paper's approach at 20 Hz until `stop`, with `hdv` a car on the
+/// priority road as far from the junction (a risky conflict, so an object of every request).
+fn feeder(prefix: String, config: Config, stop: Arc<AtomicBool>, hdv: bool) -> JoinHandle<()> {
     std::thread::spawn(move || {
         let node = iox::node("intake-feeder", &config).expect("node");
         let publisher =
@@ -39,24 +44,44 @@ fn feeder(prefix: String, config: Config, stop: Arc<AtomicBool>) -> JoinHandle<(
             let t = seq as f64 * 0.05;
             let x = 60.0 - (8.0 * t) % 30.0;
             let ego = AgentState::moving(0, Vec2::new(x, 5.0), std::f64::consts::PI, 8.0);
-            let scene = Scene::new(t, ego, paper::CAV_LEFT);
+            let mut scene = Scene::new(t, ego, paper::CAV_LEFT);
+            if hdv {
+                scene.push(AgentState::moving(
+                    HDV,
+                    Vec2::new(-5.0 - x / 2.0, -5.0),
+                    0.0,
+                    4.0,
+                ));
+            }
             iox::send(&publisher, &SceneFrame::from_scene(seq, now_ns(), &scene)).expect("send");
             std::thread::sleep(Duration::from_millis(50));
         }
     })
 }
 
-/// Runs the core at `rate_hz` for `seconds` beside the feeder and `sidecar`, which gets the
-/// request subscriber and the advice publisher on its own thread; returns the final counters.
+/// The core process's configuration for a test under `prefix` at `rate_hz`.
+fn service(prefix: &str, rate_hz: f64) -> ServiceConfig {
+    ServiceConfig {
+        prefix: prefix.to_string(),
+        rate_hz,
+        print_period_s: 0.0,
+        ..ServiceConfig::default()
+    }
+}
+
+/// Runs the core as `cfg` says for `seconds` beside the feeder (with the car `hdv`) and
+/// `sidecar`, which gets the request subscriber and the advice publisher on its own thread;
+/// returns the final counters, after checking that every advice received is counted once.
 fn run(
-    prefix: &str,
-    rate_hz: f64,
+    cfg: ServiceConfig,
+    hdv: bool,
     seconds: f64,
     sidecar: impl FnOnce(&Requests, &AdviceOut) + Send + 'static,
 ) -> CoreStats {
+    let prefix = cfg.prefix.as_str();
     let config = iox::init(None).expect("iceoryx2 config");
     let stop = Arc::new(AtomicBool::new(false));
-    let feed = feeder(prefix.to_string(), config.clone(), stop.clone());
+    let feed = feeder(prefix.to_string(), config.clone(), stop.clone(), hdv);
     let side = {
         let (config, prefix) = (config.clone(), prefix.to_string());
         std::thread::spawn(move || {
@@ -66,12 +91,6 @@ fn run(
             let advice = iox::publisher(&node, &name(services::ADVICE)).expect("publisher");
             sidecar(&requests, &advice);
         })
-    };
-    let cfg = ServiceConfig {
-        prefix: prefix.to_string(),
-        rate_hz,
-        print_period_s: 0.0,
-        ..ServiceConfig::default()
     };
     let mut params = Params::default();
     params.trajectory.samples = 128;
@@ -91,6 +110,11 @@ fn run(
     stop.store(true, Ordering::Relaxed);
     feed.join().expect("feeder");
     side.join().expect("sidecar");
+    assert_eq!(
+        stats.advice_received,
+        stats.advice_verdicts.iter().sum::<u64>() + stats.advice_superseded + stats.advice_pending,
+        "every advice is judged, superseded or pending: {stats:?}"
+    );
     stats
 }
 
@@ -134,7 +158,7 @@ fn answer(r: &AdviceRequest) -> WireAdvice {
 #[test]
 fn malformed_advice_and_failure_reports_install_nothing() {
     let prefix = format!("intake-bad-{}/", std::process::id());
-    let stats = run(&prefix, 20.0, 2.5, |requests, out| {
+    let stats = run(service(&prefix, 20.0), false, 2.5, |requests, out| {
         let nan_intent = WireIntent {
             style: 0,
             style_confidence: f32::NAN,
@@ -204,7 +228,7 @@ fn malformed_advice_and_failure_reports_install_nothing() {
 fn publish_around_the_deadline(rate_hz: f64) {
     const MS: u64 = 1_000_000;
     let prefix = format!("intake-deadline-{rate_hz}-{}/", std::process::id());
-    let stats = run(&prefix, rate_hz, 6.0, |requests, out| {
+    let stats = run(service(&prefix, rate_hz), false, 6.0, |requests, out| {
         let mut after = 0;
         for offset in [-1i64, -1, -1, 1, 1, 1] {
             loop {
@@ -250,4 +274,80 @@ fn an_answer_published_1_ms_before_its_deadline_is_accepted_at_50_hz_and_1_ms_af
 #[test]
 fn an_answer_published_1_ms_before_its_deadline_is_accepted_at_100_hz_and_1_ms_after_never() {
     publish_around_the_deadline(100.0);
+}
+
+/// The car's intent in `r`'s objects.
+fn hdv_intent(r: &AdviceRequest) -> WireIntent {
+    r.objects[..r.n_objects as usize]
+        .iter()
+        .find(|o| o.state.id == HDV)
+        .unwrap_or_else(|| panic!("the car is not among the objects of {r:?}"))
+        .state
+        .intent
+}
+
+#[test]
+fn the_intents_of_an_advice_reach_the_scenes_until_they_expire() {
+    let prefix = format!("intake-intents-{}/", std::process::id());
+    let cfg = ServiceConfig {
+        intent_hold_s: 1.0,
+        ..service(&prefix, 20.0)
+    };
+    run(cfg, true, 4.0, |requests, out| {
+        let r = next_request(requests, 0);
+        assert_eq!(
+            r.ego_intent,
+            WireIntent::default(),
+            "no intent before the advice"
+        );
+        assert_eq!(hdv_intent(&r), WireIntent::default());
+        // The passenger is in a hurry to a hospital; the car said it gives way; a road user
+        // that is not in the scene said it proceeds.
+        let emergency = WireIntent {
+            task: Task::Emergency as u8,
+            task_confidence: 0.9,
+            ..WireIntent::default()
+        };
+        let gives_way = WireIntent {
+            action: IntentAction::Yield as u8,
+            action_confidence: 0.9,
+            ..WireIntent::default()
+        };
+        let mut a = WireAdvice {
+            ego_intent: emergency,
+            n_agent_intents: 2,
+            published_ns: now_ns(),
+            ..answer(&r)
+        };
+        a.agent_intents[0].agent_id = HDV;
+        a.agent_intents[0].intent = gives_way;
+        a.agent_intents[1].agent_id = HDV + 1;
+        a.agent_intents[1].intent = WireIntent {
+            action: IntentAction::Proceed as u8,
+            ..gives_way
+        };
+        iox::send(out, &a).expect("send");
+        let sent = now_ns();
+        let r = next_request(requests, sent + 100_000_000);
+        assert_eq!(
+            r.ego_intent, emergency,
+            "the passenger's intent is in the scene"
+        );
+        assert_eq!(
+            hdv_intent(&r),
+            gives_way,
+            "the car's intent is in the scene"
+        );
+        let r = next_request(requests, sent + 1_200_000_000);
+        assert_eq!(
+            r.ego_intent,
+            WireIntent::default(),
+            "held past intent_hold_s"
+        );
+        assert_eq!(
+            hdv_intent(&r),
+            WireIntent::default(),
+            "held past intent_hold_s"
+        );
+    });
 }
