@@ -14,9 +14,9 @@ use concord_core::opm::{ConflictPair, ConflictSet, OpmTriplet};
 use concord_core::params::{ChoiceParams, InteractionParams, OpmParams, Params};
 use concord_core::scene::{
     paper, AgentState, BuiltIn, ConflictKind, ExplicitIntent, History, IntentAction, Morphology,
-    Rated, RightOfWay, Vec2,
+    ProcessState, Rated, RightOfWay, Vec2, MAX_AGENTS,
 };
-use concord_core::trajectory::Reject;
+use concord_core::trajectory::{Forecast, FrenetState, Planner, Reject};
 use concord_core::{DecisionCore, Scene};
 
 /// A conflict with the ego's and the other's passages at `ego` and `other` (distances from
@@ -513,6 +513,54 @@ fn the_planner_keeps_the_post_encroachment_margin_behind_a_crossing_car() {
     no_margin.interaction.pet_behind_s = 0.0;
     no_margin.interaction.pet_go_s = 0.0;
     assert!(run(no_margin).is_ok());
+}
+
+#[test]
+fn the_planner_keeps_the_margins_in_the_egos_passage_of_the_zone_only() {
+    // The ego 10 m along its lane at 6 m/s; a car 20 m ahead of it in that lane at 4 m/s, in
+    // its passage of a zone for the whole horizon; the ego's passage of that zone is 25–35 m
+    // ahead. The margin boxes lie there, not along the car's whole path.
+    let morph = Morphology::built_in(BuiltIn::PaperIntersection);
+    let p = Params::default().trajectory;
+    let s0 = 10.0;
+    let (pos, heading, _) = morph.lane(paper::CAV_LEFT).pose_at(s0 + 20.0, 0);
+    let agents = [AgentState::moving(1, pos, heading, 4.0)];
+    let mut processes = [ProcessState::default(); MAX_AGENTS];
+    processes[0] = ProcessState::of(&agents[0], &morph, 1.0);
+    let mut forecasts = [Forecast::default(); MAX_AGENTS];
+    forecasts[0] = Forecast {
+        pet_s: [1.6, 2.0],
+        pass_m: [0.0, 1000.0],
+        ego_pass_m: [25.0, 35.0],
+        ..Forecast::default()
+    };
+    let start = FrenetState {
+        s: s0,
+        ds: 6.0,
+        ..FrenetState::default()
+    };
+    let mut planner = Planner::default();
+    planner.prepare(
+        paper::CAV_LEFT,
+        start,
+        100.0,
+        &agents,
+        &processes,
+        &forecasts,
+        &morph,
+        &p,
+    );
+    let steps = (p.horizon_s / p.dt_s) as usize;
+    let margins: Vec<_> = (0..steps)
+        .flat_map(|k| planner.occupancy.boxes(k).filter(|b| b.4))
+        .collect();
+    assert!(!margins.is_empty(), "the car gets margin boxes");
+    for (lo, hi, ..) in margins {
+        assert!(
+            lo >= s0 + 25.0 - 1e-9 && hi <= s0 + 35.0 + 1e-9,
+            "a margin box over [{lo:.2}, {hi:.2}] m, outside the passage [35, 45] m"
+        );
+    }
 }
 
 #[test]
