@@ -971,6 +971,92 @@ fn a_road_user_stating_it_proceeds_adds_its_gain_to_the_safety_preference() {
 }
 
 #[test]
+fn a_stated_yield_adds_its_efficiency_gain_unless_the_motion_contradicts_it() {
+    use concord_core::intent::Stated;
+    use concord_core::scene::{IntentAction, Rated};
+    // The CAV 10 m before the junction; the HDV 15 m before the crossing (so both near, and
+    // the HDV an object of the triplet), standing (its motion agrees with a yield) or at
+    // 10 m/s and accelerating at 2 m/s² (it proceeds: a stated yield is contradicted).
+    let run = |speed: f64, accel: f64, says_yield: bool| {
+        let mut core = paper_core(Params::default());
+        let mut scene = paper_scene(0.0, 8.0, speed);
+        scene.ego.pos = Vec2::new(10.0, 5.0);
+        scene.agents[0].pos = Vec2::new(-12.0, -5.0);
+        scene.agents[0].acc = Vec2::new(accel, 0.0);
+        if says_yield {
+            scene.agents[0].intent.action = Some(Rated {
+                value: IntentAction::Yield,
+                confidence: 0.9,
+            });
+        }
+        core.step(&scene, 0.0, None).unwrap();
+        let stated = core.conflicts().pairs().first().map(|c| c.intent.stated);
+        (core.choice().efficiency_preference, stated)
+    };
+    let gain = ChoiceParams::default().other_yields_efficiency;
+    let (plain, _) = run(0.0, 0.0, false);
+    let (agreed, stated) = run(0.0, 0.0, true);
+    assert_eq!(stated, Some(Stated::Yield));
+    assert!(
+        (agreed - (plain + gain)).abs() < EPS,
+        "{plain} + {gain} != {agreed}"
+    );
+    let (plain, _) = run(10.0, 2.0, false);
+    let (contradicted, stated) = run(10.0, 2.0, true);
+    assert_eq!(stated, Some(Stated::Contradicted));
+    assert!(
+        (contradicted - plain).abs() < EPS,
+        "{contradicted} != {plain}"
+    );
+}
+
+#[test]
+fn accelerate_aims_at_the_speed_plus_its_acceleration_over_the_horizon() {
+    // From 5 m/s under a 13.9 m/s cap: v0 + a·h = 5 + 1.5 · 3 = 9.5 m/s, reached at a.
+    let ctx = concord_core::choice::EgoContext {
+        speed: 5.0,
+        speed_cap: 13.9,
+        min_duration: 1.0,
+        max_duration: 6.0,
+        ..Default::default()
+    };
+    let p = ChoiceParams::default();
+    let a = concord_core::choice::profile(Maneuver::Accelerate, &ctx, &p);
+    let target = 5.0 + p.accelerate_mps2 * p.maneuver_horizon_s;
+    assert!((a.target_speed - target).abs() < EPS, "{a:?}");
+    assert!((a.accel - p.accelerate_mps2).abs() < EPS, "{a:?}");
+}
+
+#[test]
+fn braking_less_than_idm_behind_a_close_leader_costs_matching_by_the_excess_over_comfort() {
+    // 10 m/s, closing on a leader 10 m ahead at 4 m/s: IDM brakes harder than "decelerate"
+    // does, and the matching attribute loses gain · (a − a_IDM) / idm_comfort_decel_mps2.
+    let p = Params::default();
+    let mut core = paper_core(p);
+    let ego = AgentState::moving(0, Vec2::new(40.0, 5.0), core::f64::consts::PI, 10.0);
+    let mut scene = concord_core::Scene::new(0.0, ego, paper::CAV_LEFT);
+    scene.push(AgentState::moving(
+        2,
+        Vec2::new(30.0, 5.0),
+        core::f64::consts::PI,
+        4.0,
+    ));
+    core.step(&scene, 0.0, None).unwrap();
+    let leader = core.triplet().leader.expect("the car ahead leads");
+    let c = p.choice;
+    let a_idm = idm_accel(10.0, leader.gap_m, 10.0 - leader.speed_mps, &c);
+    let i = Maneuver::Decelerate.index();
+    let excess = core.choice().profiles[i].accel - a_idm;
+    assert!(excess > 0.0, "IDM brakes harder: {a_idm}");
+    let expected = 1.0 - c.idm_penalty_gain * excess / c.idm_comfort_decel_mps2;
+    let matching = core.choice().attributes[i][0];
+    assert!(
+        (matching - expected).abs() < EPS,
+        "{matching} != {expected}"
+    );
+}
+
+#[test]
 fn eq13_state_features_of_an_empty_scene() {
     // Speed over the reference minus 1, acceleration over 3, and with nothing around: the
     // ΔTTC, conflict and leader terms at their caps, no risky conflict.

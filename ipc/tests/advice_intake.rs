@@ -6,7 +6,6 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::thread::JoinHandle;
 use std::time::Duration;
 
 use concord_core::scene::{paper, AgentState, IntentAction, Scene, Task, Vec2};
@@ -15,14 +14,15 @@ use concord_ipc::clock::now_ns;
 use concord_ipc::core_service::{self, ServiceConfig, StopAfter};
 use concord_ipc::system::RealtimeConfig;
 use concord_ipc::wire::{
-    AdviceRequest, CoreStats, SceneFrame, WireAdvice, WireAgentIntent, WireIntent, UNKNOWN,
-    WIRE_OBJECTS,
+    AdviceRequest, CoreStats, WireAdvice, WireAgentIntent, WireIntent, UNKNOWN, WIRE_OBJECTS,
 };
 use concord_ipc::{iox, services};
-use iceoryx2::config::Config;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
+
+#[path = "support/scene_feeder.rs"]
+mod scene_feeder;
 
 type Requests = Subscriber<ipc::Service, AdviceRequest, ()>;
 type AdviceOut = Publisher<ipc::Service, WireAdvice, ()>;
@@ -30,33 +30,21 @@ type AdviceOut = Publisher<ipc::Service, WireAdvice, ()>;
 /// Track id of the road user the feeder adds with `hdv`.
 const HDV: u32 = 7;
 
-/// Publishes the ego on the paper's approach at 20 Hz until `stop`, with `hdv` a car on the
-/// priority road as far from the junction (a risky conflict, so an object of every request).
-fn feeder(prefix: String, config: Config, stop: Arc<AtomicBool>, hdv: bool) -> JoinHandle<()> {
-    std::thread::spawn(move || {
-        let node = iox::node("intake-feeder", &config).expect("node");
-        let publisher =
-            iox::publisher::<SceneFrame>(&node, &services::name(&prefix, services::SCENE))
-                .expect("publisher");
-        let mut seq = 0;
-        while !stop.load(Ordering::Relaxed) {
-            seq += 1;
-            let t = seq as f64 * 0.05;
-            let x = 60.0 - (8.0 * t) % 30.0;
-            let ego = AgentState::moving(0, Vec2::new(x, 5.0), std::f64::consts::PI, 8.0);
-            let mut scene = Scene::new(t, ego, paper::CAV_LEFT);
-            if hdv {
-                scene.push(AgentState::moving(
-                    HDV,
-                    Vec2::new(-5.0 - x / 2.0, -5.0),
-                    0.0,
-                    4.0,
-                ));
-            }
-            iox::send(&publisher, &SceneFrame::from_scene(seq, now_ns(), &scene)).expect("send");
-            std::thread::sleep(Duration::from_millis(50));
-        }
-    })
+/// The ego on the paper's approach at `t` s, with `hdv` a car on the priority road about as far
+/// from the junction in time (a risky conflict, so an object of every request).
+fn scene_at(t: f64, hdv: bool) -> Scene {
+    let x = 60.0 - (8.0 * t) % 30.0;
+    let ego = AgentState::moving(0, Vec2::new(x, 5.0), std::f64::consts::PI, 8.0);
+    let mut scene = Scene::new(t, ego, paper::CAV_LEFT);
+    if hdv {
+        scene.push(AgentState::moving(
+            HDV,
+            Vec2::new(-5.0 - x / 2.0, -5.0),
+            0.0,
+            4.0,
+        ));
+    }
+    scene
 }
 
 /// The core process's configuration for a test under `prefix` at `rate_hz`.
@@ -81,7 +69,9 @@ fn run(
     let prefix = cfg.prefix.as_str();
     let config = iox::init(None).expect("iceoryx2 config");
     let stop = Arc::new(AtomicBool::new(false));
-    let feed = feeder(prefix.to_string(), config.clone(), stop.clone(), hdv);
+    let feed = scene_feeder::spawn("intake-feeder", prefix, &config, &stop, 0.05, move |t| {
+        scene_at(t, hdv)
+    });
     let side = {
         let (config, prefix) = (config.clone(), prefix.to_string());
         std::thread::spawn(move || {

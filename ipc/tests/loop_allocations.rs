@@ -6,18 +6,18 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::Duration;
 
 use concord_core::scene::{paper, AgentState, Scene, Vec2};
 use concord_core::{DecisionCore, Params};
-use concord_ipc::clock::now_ns;
 use concord_ipc::core_service::{self, Geometry, ServiceConfig, StopAfter};
+use concord_ipc::iox;
 use concord_ipc::system::RealtimeConfig;
-use concord_ipc::wire::{CoreStats, SceneFrame};
-use concord_ipc::{iox, services};
+use concord_ipc::wire::CoreStats;
 
 #[path = "../../core/tests/counting_allocator/mod.rs"]
 mod counting_allocator;
+#[path = "support/scene_feeder.rs"]
+mod scene_feeder;
 
 use counting_allocator::{allocations, Counting};
 
@@ -34,36 +34,13 @@ fn ticks_allocate_nothing_but_iceoryx2s_per_sample_state() {
     let prefix = format!("alloc-{}/", std::process::id());
     let config = iox::init(None).expect("iceoryx2 config");
     let stop = Arc::new(AtomicBool::new(false));
-    let feeder = {
-        let (stop, config, prefix) = (stop.clone(), config.clone(), prefix.clone());
-        std::thread::spawn(move || {
-            let node = iox::node("alloc-feeder", &config).expect("node");
-            let publisher =
-                iox::publisher::<SceneFrame>(&node, &services::name(&prefix, services::SCENE))
-                    .expect("publisher");
-            let mut seq = 0;
-            while !stop.load(Ordering::Relaxed) {
-                seq += 1;
-                let t = seq as f64 * 0.02;
-                let ego = AgentState::moving(
-                    0,
-                    Vec2::new(40.0 - (8.0 * t) % 30.0, 5.0),
-                    std::f64::consts::PI,
-                    8.0,
-                );
-                let mut scene = Scene::new(t, ego, paper::CAV_LEFT);
-                scene.push(AgentState::moving(
-                    1,
-                    Vec2::new(-40.0 + (8.0 * t) % 30.0, -5.0),
-                    0.0,
-                    8.0,
-                ));
-                iox::send(&publisher, &SceneFrame::from_scene(seq, now_ns(), &scene))
-                    .expect("send");
-                std::thread::sleep(Duration::from_millis(20));
-            }
-        })
-    };
+    let feeder = scene_feeder::spawn("alloc-feeder", &prefix, &config, &stop, 0.02, |t| {
+        let x = (8.0 * t) % 30.0;
+        let ego = AgentState::moving(0, Vec2::new(40.0 - x, 5.0), std::f64::consts::PI, 8.0);
+        let mut scene = Scene::new(t, ego, paper::CAV_LEFT);
+        scene.push(AgentState::moving(1, Vec2::new(-40.0 + x, -5.0), 0.0, 8.0));
+        scene
+    });
     let cfg = ServiceConfig {
         prefix,
         rate_hz: 200.0,
