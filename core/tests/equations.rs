@@ -7,8 +7,12 @@ use concord_core::choice::{argmax, correct, cosine, idm_accel, ChoiceHistory, Ma
 use concord_core::opm::{delta_ttc, guarded_ttc};
 use concord_core::params::{AdviceParams, ChoiceParams, OpmParams, Params};
 use concord_core::saliency::{attend, softmax, Saliency, FEATURES};
-use concord_core::scene::{paper, AgentState, BuiltIn, Morphology, ProcessState, Turn, Vec2};
-use concord_core::trajectory::{Quartic, Quintic};
+use concord_core::scene::{
+    paper, AgentState, BuiltIn, Morphology, ProcessState, Turn, Vec2, MAX_AGENTS,
+};
+use concord_core::trajectory::{
+    Forecast, FrenetState, Hit, Planner, Quartic, Quintic, Reject, Trajectory,
+};
 use concord_core::DecisionCore;
 
 const EPS: f64 = 1e-9;
@@ -1012,7 +1016,8 @@ fn a_stated_yield_adds_its_efficiency_gain_unless_the_motion_contradicts_it() {
 
 #[test]
 fn accelerate_aims_at_the_speed_plus_its_acceleration_over_the_horizon() {
-    // From 5 m/s under a 13.9 m/s cap: v0 + a·h = 5 + 1.5 · 3 = 9.5 m/s, reached at a.
+    // From 5 m/s under a 13.9 m/s cap, a = 1 m/s² over h = 4 s: v0 + a·h = 9 m/s, reached
+    // at a (a + h, v0 · a · h and the others differ).
     let ctx = concord_core::choice::EgoContext {
         speed: 5.0,
         speed_cap: 13.9,
@@ -1020,7 +1025,11 @@ fn accelerate_aims_at_the_speed_plus_its_acceleration_over_the_horizon() {
         max_duration: 6.0,
         ..Default::default()
     };
-    let p = ChoiceParams::default();
+    let p = ChoiceParams {
+        accelerate_mps2: 1.0,
+        maneuver_horizon_s: 4.0,
+        ..ChoiceParams::default()
+    };
     let a = concord_core::choice::profile(Maneuver::Accelerate, &ctx, &p);
     let target = 5.0 + p.accelerate_mps2 * p.maneuver_horizon_s;
     assert!((a.target_speed - target).abs() < EPS, "{a:?}");
@@ -1110,4 +1119,134 @@ fn through_the_turn_the_plan_keeps_the_lateral_acceleration_limit() {
             "x {x}, v {v}: {worst}"
         );
     }
+}
+
+/// A planner on the paper's left-turn lane with `agents`, the ego `s` m along it at `v` m/s and
+/// `a` m/s².
+fn planner_with(agents: &[AgentState], s: f64, v: f64, a: f64) -> (Planner, Morphology) {
+    let morph = Morphology::built_in(BuiltIn::PaperIntersection);
+    let mut planner = Planner::default();
+    let start = FrenetState {
+        s,
+        ds: v,
+        dds: a,
+        ..FrenetState::default()
+    };
+    planner.prepare(
+        paper::CAV_LEFT,
+        start,
+        100.0,
+        agents,
+        &[ProcessState::default(); MAX_AGENTS],
+        &[Forecast::default(); MAX_AGENTS],
+        &morph,
+        &Params::default().trajectory,
+    );
+    (planner, morph)
+}
+
+/// [`planner_with`] no other road user, unaccelerated.
+fn empty_road_planner(s: f64, v: f64) -> (Planner, Morphology) {
+    planner_with(&[], s, v, 0.0)
+}
+
+#[test]
+fn a_footprint_overlapping_another_is_kept_and_a_point_in_it_is_a_contact() {
+    // Two standing cars in the ego's lane, 30 and 27 m ahead: the second's box reaches 3 m
+    // further back than the first's and is not inside it, so both block; a point in either
+    // is a contact (a footprint, not a margin).
+    let morph = Morphology::built_in(BuiltIn::PaperIntersection);
+    let lane = morph.lane(paper::CAV_LEFT);
+    let car = |ahead: f64| {
+        let (pos, heading, _) = lane.pose_at(ahead, 0);
+        AgentState::moving(1, pos, heading, 0.0)
+    };
+    let (planner, _) = planner_with(&[car(30.0), car(27.0)], 0.0, 5.0, 0.0);
+    let boxes: Vec<_> = planner.occupancy.boxes(0).collect();
+    assert_eq!(boxes.len(), 2, "{boxes:?}");
+    let back = boxes.iter().map(|b| b.0).fold(f64::INFINITY, f64::min);
+    assert!(back < 27.0 - 2.25, "{boxes:?}");
+    assert_eq!(planner.occupancy.hit(0, back + 0.1, 0.0), Hit::Contact);
+    assert_eq!(planner.occupancy.hit(0, 28.5, 0.0), Hit::Contact);
+    assert_eq!(planner.occupancy.hit(0, 10.0, 0.0), Hit::Free);
+}
+
+#[test]
+fn slowing_from_a_hard_braking_start_every_sample_keeps_its_speed_between_its_ends() {
+    // 8 m/s braking at 5 m/s², slowing to a stop over a nominal 6 s: a quartic that long would
+    // undershoot below 0 m/s; each sample's T is cut to 3 · 8 / 5 = 4.8 s, so none breaks a
+    // limit.
+    let p = Params::default().trajectory;
+    let (mut planner, _) = planner_with(&[], 0.0, 8.0, -5.0);
+    let slowing = Profile {
+        accel: -2.0,
+        target_speed: 0.0,
+        duration: 6.0,
+        stop_m: f64::INFINITY,
+    };
+    planner.sample(&slowing, 256, 0, &p);
+    let mut stats = concord_core::trajectory::PlanStats::default();
+    assert!(planner.run(256, &p, &mut stats).is_some());
+    assert_eq!(stats.limit_rejects, 0, "{stats:?}");
+}
+
+#[test]
+fn a_yielding_plan_must_still_be_able_to_stop_at_the_yield_check_time() {
+    // 6 m/s, yielding at a point 9.5 m ahead. Rolling on at 6 m/s, the ego is 6 m on at the
+    // yield check time (1 s) and needs 36 / (2 · b / 1.5) more to stop: past the point, so the
+    // plan commits, although its polynomial ends (9 m, T = 1.5 s) before the point.
+    let p = Params::default().trajectory;
+    let (mut planner, _) = empty_road_planner(0.0, 6.0);
+    planner.yield_distance = 9.5;
+    planner.clear_distance = 60.0;
+    let yielding = Profile {
+        accel: -2.0,
+        target_speed: 0.0,
+        duration: 3.0,
+        stop_m: 9.5,
+    };
+    planner.sample(&yielding, 1, 0, &p);
+    assert_eq!(
+        planner.evaluate(1.5, 6.0, 0.0, &p).err(),
+        Some(Reject::Commits)
+    );
+    // Stopping at the point is a plan.
+    assert!(planner.evaluate(19.0 / 6.0, 0.0, 0.0, &p).is_ok());
+}
+
+#[test]
+fn an_ego_too_fast_for_the_turn_that_does_not_brake_has_no_plan() {
+    // 13 m/s 20 m before the turn: holding 13 m/s into the curve exceeds its speed cap and
+    // is not on a braking curve from the start.
+    let p = Params::default().trajectory;
+    let (planner, _) = empty_road_planner(20.0, 13.0);
+    assert_eq!(
+        planner.evaluate(2.0, 13.0, 0.0, &p).err(),
+        Some(Reject::Limits)
+    );
+}
+
+#[test]
+fn the_minimum_risk_fallback_brakes_evenly_until_it_stands() {
+    // From 8 m/s with nothing to stop for: `emergency_brake_mps2` until v = 0, then 0.
+    let p = Params::default().trajectory;
+    let (planner, morph) = empty_road_planner(0.0, 8.0);
+    let mut out = Trajectory::default();
+    planner.minimum_risk(f64::INFINITY, morph.lane(paper::CAV_LEFT), &p, &mut out);
+    let t_stop = 8.0 / p.emergency_brake_mps2;
+    for pt in out.points() {
+        let expected = if pt.t < t_stop {
+            -p.emergency_brake_mps2
+        } else {
+            0.0
+        };
+        assert!(
+            (pt.accel - expected).abs() < EPS,
+            "at {} s: {}",
+            pt.t,
+            pt.accel
+        );
+        assert!((pt.speed - (8.0 - p.emergency_brake_mps2 * pt.t).max(0.0)).abs() < EPS);
+    }
+    assert!(out.points().last().unwrap().t > t_stop);
 }

@@ -516,6 +516,24 @@ fn the_planner_keeps_the_post_encroachment_margin_behind_a_crossing_car() {
 }
 
 #[test]
+fn the_planner_sees_a_car_that_arrives_at_the_crossing_with_the_ego() {
+    // Both 10 m before the crossing's zone at 6 m/s, the HDV from the west: holding 6 m/s the
+    // ego meets it there (its boxes lie west of and below the ego's lane, near the edges of
+    // the region the planner considers).
+    let mut core = paper_core(Params::default());
+    let m = *core.morphology();
+    let c = m.conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT).unwrap();
+    let (cav, h_cav, _) = m.lane(paper::CAV_LEFT).pose_at(c.zone_a[0] - 10.0, 0);
+    let (hdv, h_hdv, _) = m.lane(paper::HDV_STRAIGHT).pose_at(c.zone_b[0] - 10.0, 0);
+    let mut scene = Scene::new(0.0, AgentState::moving(0, cav, h_cav, 6.0), paper::CAV_LEFT);
+    scene.push(AgentState::moving(1, hdv, h_hdv, 6.0));
+    core.step(&scene, 0.0, None).unwrap();
+    let t = Params::default().trajectory;
+    let r = core.planner().evaluate(2.0, 6.0, 0.0, &t);
+    assert!(matches!(r, Err(Reject::Collision(_))), "{r:?}");
+}
+
+#[test]
 fn the_planner_keeps_the_margins_in_the_egos_passage_of_the_zone_only() {
     // The ego 10 m along its lane at 6 m/s; a car 20 m ahead of it in that lane at 4 m/s, in
     // its passage of a zone for the whole horizon; the ego's passage of that zone is 25–35 m
