@@ -1169,6 +1169,14 @@ fn a_footprint_overlapping_another_is_kept_and_a_point_in_it_is_a_contact() {
     assert_eq!(planner.occupancy.hit(0, back + 0.1, 0.0), Hit::Contact);
     assert_eq!(planner.occupancy.hit(0, 28.5, 0.0), Hit::Contact);
     assert_eq!(planner.occupancy.hit(0, 10.0, 0.0), Hit::Free);
+    // Each box is the Minkowski sum of two cars aligned with the lane, with the clearance
+    // at the first step (t = dt): half-extents length + margin along, width + margin across.
+    let p = Params::default().trajectory;
+    let margin = p.safety_margin_m + p.margin_growth_mps * p.dt_s;
+    for (s_lo, s_hi, l_lo, l_hi, _) in boxes {
+        assert!(((s_hi - s_lo) / 2.0 - (p.vehicle_length_m + margin)).abs() < 1e-6);
+        assert!(((l_hi - l_lo) / 2.0 - (p.vehicle_width_m + margin)).abs() < 1e-6);
+    }
 }
 
 #[test]
@@ -1219,11 +1227,41 @@ fn an_ego_too_fast_for_the_turn_that_does_not_brake_has_no_plan() {
     // 13 m/s 20 m before the turn: holding 13 m/s into the curve exceeds its speed cap and
     // is not on a braking curve from the start.
     let p = Params::default().trajectory;
-    let (planner, _) = empty_road_planner(20.0, 13.0);
+    let (mut planner, _) = empty_road_planner(20.0, 13.0);
     assert_eq!(
         planner.evaluate(2.0, 13.0, 0.0, &p).err(),
         Some(Reject::Limits)
     );
+    // Sampled around that, every candidate is counted under one outcome.
+    let holding = Profile {
+        accel: 0.0,
+        target_speed: 13.0,
+        duration: 3.0,
+        stop_m: f64::INFINITY,
+    };
+    planner.sample(&holding, 64, 0, &p);
+    let mut s = concord_core::trajectory::PlanStats::default();
+    planner.run(64, &p, &mut s);
+    assert!(s.limit_rejects > 0, "{s:?}");
+    assert_eq!(
+        s.evaluated,
+        s.feasible + s.limit_rejects + s.collision_rejects + s.zone_rejects + s.score_rejects,
+        "{s:?}"
+    );
+}
+
+#[test]
+fn a_lateral_shift_too_sharp_for_the_speed_breaks_the_curvature_bound() {
+    // At 2.5 m/s a 1 m shift over 2 s needs |l̈| up to 5.77 / 4 m/s², within the lateral
+    // acceleration limit, but |l̈| / ṡ² plus the turn's curvature ahead exceeds
+    // `max_curvature`; holding the lane centre is a plan.
+    let p = Params::default().trajectory;
+    let (planner, _) = empty_road_planner(0.0, 2.5);
+    assert_eq!(
+        planner.evaluate(2.0, 2.5, 1.0, &p).err(),
+        Some(Reject::Limits)
+    );
+    assert!(planner.evaluate(2.0, 2.5, 0.0, &p).is_ok());
 }
 
 #[test]
