@@ -735,6 +735,31 @@ fn the_fallback_clears_a_zone_rather_than_standing_in_it() {
 }
 
 #[test]
+fn the_fallback_does_not_drive_into_a_car_to_leave_a_zone() {
+    // As above, but a car stands in the ego's lane 12 m ahead, past the zone: every drive-on
+    // would hit it, braking hits nothing, so the fallback brakes (standing in the zone).
+    let p = Params::default();
+    let mut core = paper_core(p);
+    let lane = *core.morphology().lane(paper::CAV_LEFT);
+    let (pos, h, _) = lane.pose_at(33.0, 0);
+    let mut scene = Scene::new(0.0, AgentState::moving(0, pos, h, 3.0), paper::CAV_LEFT);
+    let (ahead, h_ahead, _) = lane.pose_at(45.0, 0);
+    scene.push(AgentState::moving(1, ahead, h_ahead, 0.0));
+    core.step(&scene, 0.0, None).unwrap();
+    let mut planner = *core.planner();
+    let profiles = core.choice().profiles;
+    let drive_on = [
+        profiles[Maneuver::KeepSpeed.index()],
+        profiles[Maneuver::Accelerate.index()],
+    ];
+    let mut out = concord_core::Trajectory::default();
+    let taken = planner.fallback(f64::INFINITY, &lane, &drive_on, 1, &p.trajectory, &mut out);
+    assert_eq!(taken, None);
+    assert!(planner.in_zone(out.points().last().unwrap().s));
+    assert_eq!(planner.first_contact(&out), None);
+}
+
+#[test]
 fn a_car_queued_behind_one_that_waits_for_the_ego_waits_too() {
     // The deadlock of the test above with a second car standing 10 m behind the first: once
     // the first counts as yielding, the one behind it cannot arrive first either, so the core
