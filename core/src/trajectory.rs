@@ -31,6 +31,14 @@ pub const MAX_BOXES: usize = 16;
 const MARGIN_CHUNK: usize = 4;
 /// Bins of the curvature speed-cap table.
 pub const VCAP_BINS: usize = 256;
+/// Largest overshoot of a quintic that brings a lateral speed u to rest over T with no change
+/// of offset (l̈ = 0 at both ends), per u·T: 16/81, at T/3.
+const OVERSHOOT_PER_UT: f64 = 16.0 / 81.0;
+/// Relative error below which a footprint box counts as exact: the lane's curvature times the
+/// box's lateral reach, and |cos·sin| of the relative heading.
+const FRAME_EXACT_TOLERANCE: f64 = 0.02;
+/// Bins of the ego lane's pose table over the planning window.
+const FRAME_BINS: usize = 256;
 /// Below this speed at the end of the horizon a candidate stands, m/s.
 const STANDING_MPS: f64 = 0.3;
 /// Most time steps a post-encroachment margin spans on each side.
@@ -162,8 +170,100 @@ pub enum Hit {
     Contact,
 }
 
+/// The other road user's predicted footprint behind an occupancy box: centre, heading
+/// (cos, sin) and the clearance added around its rectangle, m.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Footprint {
+    pub centre: Vec2,
+    pub cos: f64,
+    pub sin: f64,
+    pub clearance: f64,
+}
+
+/// Poses of the ego lane's reference line over the planning window, tabulated so that the
+/// ego's footprint can be placed at any (s, l) without searching the polyline.
+#[derive(Clone, Copy, Debug)]
+struct LaneFrame {
+    s_lo: f64,
+    inv_bin: f64,
+    x: [f64; FRAME_BINS + 1],
+    y: [f64; FRAME_BINS + 1],
+    cos: [f64; FRAME_BINS + 1],
+    sin: [f64; FRAME_BINS + 1],
+}
+
+impl Default for LaneFrame {
+    fn default() -> Self {
+        LaneFrame {
+            s_lo: 0.0,
+            inv_bin: 1.0,
+            x: [0.0; FRAME_BINS + 1],
+            y: [0.0; FRAME_BINS + 1],
+            cos: [1.0; FRAME_BINS + 1],
+            sin: [0.0; FRAME_BINS + 1],
+        }
+    }
+}
+
+impl LaneFrame {
+    fn fill(&mut self, lane: &Lane, s_lo: f64, s_hi: f64) {
+        let bin = ((s_hi - s_lo) / FRAME_BINS as f64).max(1e-3);
+        self.s_lo = s_lo;
+        self.inv_bin = 1.0 / bin;
+        let mut hint = lane.segment_at(s_lo, 0);
+        for k in 0..=FRAME_BINS {
+            let (q, tangent, seg) = lane.pose_at(s_lo + k as f64 * bin, hint);
+            hint = seg;
+            self.x[k] = q.x;
+            self.y[k] = q.y;
+            self.cos[k] = cos(tangent);
+            self.sin[k] = sin(tangent);
+        }
+    }
+
+    /// The ego's centre and heading (cos, sin) at Frenet (s, l), interpolated between bins
+    /// (extrapolated along the end bins outside the window).
+    fn pose(&self, s: f64, l: f64) -> (Vec2, f64, f64) {
+        let u = (s - self.s_lo) * self.inv_bin;
+        let k = (u.max(0.0) as usize).min(FRAME_BINS - 1);
+        let f = u - k as f64;
+        let lerp = |a: &[f64; FRAME_BINS + 1]| a[k] + (a[k + 1] - a[k]) * f;
+        let (c, s_) = (lerp(&self.cos), lerp(&self.sin));
+        let norm = sqrt(c * c + s_ * s_).max(1e-9);
+        let (c, s_) = (c / norm, s_ / norm);
+        (
+            Vec2::new(lerp(&self.x) - s_ * l, lerp(&self.y) + c * l),
+            c,
+            s_,
+        )
+    }
+}
+
+/// True when rectangles with centres `a`, `b`, headings (cos, sin) and half extents
+/// (length, width) overlap (separating-axis test on their four edge normals).
+fn rectangles_overlap(
+    a: Vec2,
+    (ac, as_): (f64, f64),
+    (al, aw): (f64, f64),
+    b: Vec2,
+    (bc, bs): (f64, f64),
+    (bl, bw): (f64, f64),
+) -> bool {
+    let d = b.minus(a);
+    let axes = [(ac, as_), (-as_, ac), (bc, bs), (-bs, bc)];
+    axes.iter().all(|&(x, y)| {
+        let radius_a = al * fabs(ac * x + as_ * y) + aw * fabs(-as_ * x + ac * y);
+        let radius_b = bl * fabs(bc * x + bs * y) + bw * fabs(-bs * x + bc * y);
+        fabs(d.x * x + d.y * y) <= radius_a + radius_b
+    })
+}
+
 /// Boxes in (s, l) that the ego's reference point may not enter, per time step: footprints,
-/// and post-encroachment margins (flagged).
+/// and post-encroachment margins (flagged). A footprint box is the broad phase: a point inside
+/// one is a contact only when the ego's rectangle placed there overlaps the other's predicted
+/// rectangle with its clearance (boxes in a curved lane's frame are larger than the cars, and
+/// a car in the opposite lane beside the start of a turn would otherwise touch a car standing
+/// at the stop line). Merged boxes are contacts without that test.
 #[derive(Clone, Copy, Debug)]
 pub struct Occupancy {
     s_lo: [[f64; MAX_BOXES]; MAX_STEPS],
@@ -171,11 +271,16 @@ pub struct Occupancy {
     l_lo: [[f64; MAX_BOXES]; MAX_STEPS],
     l_hi: [[f64; MAX_BOXES]; MAX_STEPS],
     margin: [[bool; MAX_BOXES]; MAX_STEPS],
+    /// The footprint of a box that holds one road user's, for the exact test.
+    footprint: [[Option<Footprint>; MAX_BOXES]; MAX_STEPS],
     n: [u8; MAX_STEPS],
     /// Union s-interval of the step's boxes, for whole-step rejection.
     step_lo: [f64; MAX_STEPS],
     step_hi: [f64; MAX_STEPS],
     steps: usize,
+    frame: LaneFrame,
+    /// Half length and half width of the ego and of the others' rectangles, m.
+    half: (f64, f64),
 }
 
 impl Default for Occupancy {
@@ -186,10 +291,13 @@ impl Default for Occupancy {
             l_lo: [[0.0; MAX_BOXES]; MAX_STEPS],
             l_hi: [[0.0; MAX_BOXES]; MAX_STEPS],
             margin: [[false; MAX_BOXES]; MAX_STEPS],
+            footprint: [[None; MAX_BOXES]; MAX_STEPS],
             n: [0; MAX_STEPS],
             step_lo: [f64::INFINITY; MAX_STEPS],
             step_hi: [f64::NEG_INFINITY; MAX_STEPS],
             steps: 0,
+            frame: LaneFrame::default(),
+            half: (2.4, 1.0),
         }
     }
 }
@@ -202,20 +310,37 @@ impl Occupancy {
         self.step_hi[..steps].fill(f64::NEG_INFINITY);
     }
 
-    /// Adds a box at `step` (`margin`: a post-encroachment margin, not a footprint). A box inside
-    /// another that blocks at least as much is dropped; when the step is full, it is merged
-    /// into the box whose area grows least, one of its own kind if there is one (a footprint
-    /// merged with a margin stays a footprint).
-    fn add(&mut self, step: usize, s_lo: f64, s_hi: f64, l_lo: f64, l_hi: f64, margin: bool) {
+    /// Adds a box at `step` (`margin`: a post-encroachment margin, not a footprint; `footprint`:
+    /// the one road user's rectangle behind a footprint box). A box inside another that blocks
+    /// at least as much is dropped (a footprint box that covers another footprint's loses its
+    /// rectangle and blocks all of itself); when the step is full, it is merged into the box
+    /// whose area grows least, one of its own kind if there is one (a footprint merged with a
+    /// margin stays a footprint; a merged box loses its rectangle).
+    #[allow(clippy::too_many_arguments)]
+    fn add(
+        &mut self,
+        step: usize,
+        s_lo: f64,
+        s_hi: f64,
+        l_lo: f64,
+        l_hi: f64,
+        margin: bool,
+        footprint: Option<Footprint>,
+    ) {
         let k = self.n[step] as usize;
-        let covered = (0..k).any(|b| {
+        let covering = (0..k).find(|&b| {
             (margin || !self.margin[step][b])
                 && self.s_lo[step][b] <= s_lo
                 && self.s_hi[step][b] >= s_hi
                 && self.l_lo[step][b] <= l_lo
                 && self.l_hi[step][b] >= l_hi
         });
-        if covered {
+        if let Some(b) = covering {
+            // A footprint inside another footprint's box: the covering box keeps both by
+            // blocking all of itself.
+            if !margin && self.footprint[step][b] != footprint {
+                self.footprint[step][b] = None;
+            }
             return;
         }
         if k < MAX_BOXES {
@@ -224,6 +349,7 @@ impl Occupancy {
             self.l_lo[step][k] = l_lo;
             self.l_hi[step][k] = l_hi;
             self.margin[step][k] = margin;
+            self.footprint[step][k] = footprint;
             self.n[step] += 1;
         } else {
             let mut best = 0;
@@ -245,6 +371,7 @@ impl Occupancy {
             self.l_lo[step][best] = self.l_lo[step][best].min(l_lo);
             self.l_hi[step][best] = self.l_hi[step][best].max(l_hi);
             self.margin[step][best] &= margin;
+            self.footprint[step][best] = None;
         }
         self.step_lo[step] = self.step_lo[step].min(s_lo);
         self.step_hi[step] = self.step_hi[step].max(s_hi);
@@ -256,23 +383,33 @@ impl Occupancy {
         s >= self.step_lo[step] && s <= self.step_hi[step]
     }
 
-    /// What (s, l) meets at `step`: a footprint before a margin.
+    /// What the ego centred at (s, l) meets at `step`: a footprint before a margin.
     #[inline(always)]
     pub fn hit(&self, step: usize, s: f64, l: f64) -> Hit {
         if !self.may_hit(step, s) {
             return Hit::Free;
         }
         let mut hit = Hit::Free;
+        let mut ego = None;
         for b in 0..self.n[step] as usize {
             if s >= self.s_lo[step][b]
                 && s <= self.s_hi[step][b]
                 && l >= self.l_lo[step][b]
                 && l <= self.l_hi[step][b]
             {
-                if !self.margin[step][b] {
+                if self.margin[step][b] {
+                    hit = Hit::Margin;
+                    continue;
+                }
+                let Some(f) = self.footprint[step][b] else {
+                    return Hit::Contact;
+                };
+                let (centre, c, s_) = *ego.get_or_insert_with(|| self.frame.pose(s, l));
+                let (hl, hw) = self.half;
+                let other = (hl + f.clearance, hw + f.clearance);
+                if rectangles_overlap(centre, (c, s_), (hl, hw), f.centre, (f.cos, f.sin), other) {
                     return Hit::Contact;
                 }
-                hit = Hit::Margin;
             }
         }
         hit
@@ -664,6 +801,12 @@ impl Planner {
             Vec2::new(max.x + inflate, max.y + inflate),
         );
         let lateral_reach = lane.half_width + p.max_lateral_offset_m;
+        self.occupancy.half = (half_l, half_w);
+        self.occupancy.frame.fill(
+            lane,
+            s0 - p.vehicle_length_m,
+            s0 + reach + p.vehicle_length_m,
+        );
 
         for (j, agent) in agents.iter().enumerate() {
             let here = lane.project_range(agent.pos, first, last);
@@ -722,7 +865,21 @@ impl Planner {
                 let b = [fr.s - ext_s, fr.s + ext_s, fr.l - ext_l, fr.l + ext_l];
                 let step = i.wrapping_sub(behind);
                 if step < self.steps {
-                    self.occupancy.add(step, b[0], b[1], b[2], b[3], false);
+                    // The box is the exact Minkowski sum of the two rectangles where the lane
+                    // is straight across it and the headings are parallel or perpendicular;
+                    // elsewhere it is larger, and the rectangles decide.
+                    let bent = fabs(fr.l) + ext_l;
+                    let curved = [b[0], fr.s, b[1]]
+                        .iter()
+                        .any(|&q| lane.curvature_at(q, fr.segment) * bent > FRAME_EXACT_TOLERANCE);
+                    let footprint = (curved || c * s > FRAME_EXACT_TOLERANCE).then(|| Footprint {
+                        centre: pos,
+                        cos: cos(heading),
+                        sin: sin(heading),
+                        clearance: margin,
+                    });
+                    self.occupancy
+                        .add(step, b[0], b[1], b[2], b[3], false, footprint);
                 }
                 let along = forecast.travel(v, t, p.max_speed_mps.max(v));
                 if along >= f.pass_m[0] && along <= f.pass_m[1] {
@@ -767,7 +924,7 @@ impl Planner {
                 }
                 let steps = first.saturating_sub(behind + ahead)..=last.min(self.steps - 1);
                 for step in steps {
-                    self.occupancy.add(step, s_lo, s_hi, u[2], u[3], true);
+                    self.occupancy.add(step, s_lo, s_hi, u[2], u[3], true, None);
                 }
             }
         }
@@ -950,9 +1107,24 @@ impl Planner {
         // The lateral path must stay within the offset allowed for terminal states (or within
         // the start's offset when the ego is already further out): a quintic that starts
         // with lateral velocity can overshoot both ends, and replanning from the overshoot
-        // would let the ego drift out of its lane in a turn.
+        // would let the ego drift out of its lane in a turn. An ego already drifting outwards
+        // at u m/s cannot stop at once: a quintic that brings u to rest over T while holding
+        // its offset overshoots it by 16/81·u·T, and its initial jerk 36u/T² keeps within the
+        // jerk limit J only for T ≥ 6√(u/J). The bound allows the overshoot of the quickest
+        // such correction (T also at least the shortest duration) beyond the start's offset;
+        // without it, near the bound, every candidate fails and the ego brakes hard where
+        // nothing is in its way.
         let lateral_moves = l.c[1..].iter().any(|c| *c != 0.0);
-        let l_bound = p.max_lateral_offset_m.max(fabs(st.l)) + 1e-6;
+        let outward = if st.l * st.dl >= 0.0 {
+            fabs(st.dl)
+        } else {
+            0.0
+        };
+        let quickest = p.min_duration_s.max(6.0 * sqrt(outward / p.max_jerk_mps3));
+        let l_bound = p
+            .max_lateral_offset_m
+            .max(fabs(st.l) + OVERSHOOT_PER_UT * outward * quickest)
+            + 1e-6;
         let goal = st.s + self.goal_distance;
         let mut t_goal = f64::NAN;
         let (mut prev_t, mut prev_s) = (0.0, st.s);

@@ -1179,6 +1179,103 @@ fn a_footprint_overlapping_another_is_kept_and_a_point_in_it_is_a_contact() {
     }
 }
 
+/// A planner on highway-env's left turn with the ego standing at the end of its approach
+/// (x = 2, y = 11, heading −y), where the turn begins, and `agents` standing still.
+fn standing_at_the_turn(agents: &[AgentState]) -> Planner {
+    use concord_core::scene::highway_env_intersection::{APPROACH_M, EGO_LEFT};
+    let morph = Morphology::built_in(BuiltIn::HighwayEnvIntersection);
+    let mut planner = Planner::default();
+    let start = FrenetState {
+        s: APPROACH_M,
+        ..FrenetState::default()
+    };
+    planner.prepare(
+        EGO_LEFT,
+        start,
+        50.0,
+        agents,
+        &[ProcessState::default(); MAX_AGENTS],
+        &[Forecast::default(); MAX_AGENTS],
+        &morph,
+        &Params::default().trajectory,
+    );
+    planner
+}
+
+#[test]
+fn a_car_beside_the_start_of_a_turn_in_the_opposite_lane_is_no_contact() {
+    // Oncoming (x = −2, heading +y) beside the ego's front, 4 m ahead of its centre: 2 m of
+    // road between their sides. In the turning lane's frame its box is inflated (it projects
+    // onto the arc, at a slant) and covers the ego's centre; the rectangles do not touch, so
+    // it is no contact. A car with its corner over the ego's front is one.
+    let down = core::f64::consts::FRAC_PI_2;
+    let beside = AgentState::moving(1, Vec2::new(-2.0, 7.0), down, 0.0);
+    let planner = standing_at_the_turn(&[beside]);
+    let s0 = planner.start.s;
+    assert!(
+        planner.occupancy.boxes(0).any(|b| !b.4
+            && b.0 <= s0
+            && s0 <= b.1
+            && b.2 <= 0.0
+            && 0.0 <= b.3),
+        "the broad box covers the ego's centre"
+    );
+    assert_eq!(planner.occupancy.hit(0, s0, 0.0), Hit::Free);
+    let stand = planner.evaluate(1.0, 0.0, 0.0, &Params::default().trajectory);
+    assert!(stand.is_ok(), "standing at the turn: {stand:?}");
+
+    let over = AgentState::moving(1, Vec2::new(0.5, 8.0), down, 0.0);
+    let planner = standing_at_the_turn(&[over]);
+    assert_eq!(planner.occupancy.hit(0, s0, 0.0), Hit::Contact);
+}
+
+#[test]
+fn a_footprint_inside_another_footprints_box_still_blocks() {
+    // The car beside the turn has a large box; a second car, 3 m to the left of the turn
+    // 5.5 m into it, has its box inside that one. Where the ego would touch only the second
+    // car, the point is a contact with both present: the covered box's rectangle is not lost.
+    use concord_core::scene::highway_env_intersection::{APPROACH_M, EGO_LEFT};
+    let morph = Morphology::built_in(BuiltIn::HighwayEnvIntersection);
+    let down = core::f64::consts::FRAC_PI_2;
+    let beside = AgentState::moving(1, Vec2::new(-2.0, 7.0), down, 0.0);
+    let (s_b, l_b) = (APPROACH_M + 5.5, -3.0);
+    let (pos, heading, _) = morph.lane(EGO_LEFT).to_cartesian(s_b, l_b, 0);
+    let inside = AgentState::moving(2, pos, heading, 0.0);
+    let (s, l) = (s_b - 4.0, l_b + 2.0);
+    let only_beside = standing_at_the_turn(&[beside]);
+    let big = only_beside.occupancy.boxes(0).next().expect("a box");
+    let both = standing_at_the_turn(&[beside, inside]);
+    let small = standing_at_the_turn(&[inside])
+        .occupancy
+        .boxes(0)
+        .next()
+        .unwrap();
+    assert!(
+        big.0 <= small.0 && small.1 <= big.1 && big.2 <= small.2 && small.3 <= big.3,
+        "{small:?} inside {big:?}"
+    );
+    assert_eq!(only_beside.occupancy.hit(0, s, l), Hit::Free);
+    assert_eq!(both.occupancy.hit(0, s, l), Hit::Contact);
+}
+
+#[test]
+fn an_ego_drifting_out_at_its_lateral_bound_still_has_a_plan() {
+    // Leaving the turn at 10 m/s with 0.97 m offset, drifting outwards at 0.3 m/s: no
+    // quintic can hold 1 m, but the quickest correction overshoots by only 16/81·u·T, which
+    // the bound allows; the ego steers back instead of braking for nothing.
+    let p = Params::default().trajectory;
+    let (mut planner, _) = empty_road_planner(60.0, 10.0);
+    planner.start.l = 0.97;
+    planner.start.dl = 0.3;
+    let back = planner.evaluate(2.0, 10.0, 0.0, &p);
+    assert!(back.is_ok(), "{back:?}");
+    // A slow correction drifts further and stays refused.
+    assert!(matches!(
+        planner.evaluate(4.0, 10.0, 0.97, &p),
+        Err(Reject::Limits)
+    ));
+}
+
 #[test]
 fn slowing_from_a_hard_braking_start_every_sample_keeps_its_speed_between_its_ends() {
     // 8 m/s braking at 5 m/s², slowing to a stop over a nominal 6 s: a quartic that long would
