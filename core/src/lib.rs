@@ -124,8 +124,10 @@ pub struct Decision {
     /// What the gate made of the advice offered this cycle.
     pub advice: AdviceVerdict,
     pub fallback: FallbackReason,
-    /// What the eHMI announces: giving way when the executed maneuver gives way, going first
-    /// otherwise or while a deadlock negotiation has announced it.
+    /// What the eHMI announces: going first while a deadlock negotiation has announced it, or
+    /// when the executed trajectory enters a conflicting road user's passage before that road
+    /// user has left it; giving way when it passes behind every one or stays out; without a
+    /// conflict ahead, giving way when the executed maneuver gives way, else going first.
     pub announce: Announcement,
     /// Phase of the deadlock negotiation.
     pub negotiation: Phase,
@@ -465,15 +467,46 @@ impl DecisionCore {
                 self.minimum_risk(stop, &lane, &mut decision)
             }
         }
-        decision.announce = if self.negotiation.announces() || !decision.maneuver.gives_way() {
+        decision.announce = if self.negotiation.announces() {
             Announcement::GoingFirst
         } else {
-            Announcement::GivingWay
+            self.order(&decision.trajectory)
+                .unwrap_or(if decision.maneuver.gives_way() {
+                    Announcement::GivingWay
+                } else {
+                    Announcement::GoingFirst
+                })
         };
         self.choices
             .record(scene.time_s, self.choice.state, decision.maneuver);
         self.last = decision;
         Ok(decision)
+    }
+
+    /// What `trajectory` means for the road users in conflict with the ego: it goes first when
+    /// it enters some one's passage of the conflict zone before that road user, proceeding, has
+    /// left it (at its latest, [`choice::proceeding_interval`]); it gives way when it passes
+    /// behind every one of them or stays out of their passages within the horizon. `None`
+    /// without a conflict still ahead of both.
+    fn order(&self, trajectory: &trajectory::Trajectory) -> Option<Announcement> {
+        let points = trajectory.points();
+        let s0 = points.first()?.s;
+        let mut ahead = false;
+        for c in self.conflicts.pairs() {
+            if c.ego_pass_m[1] <= 0.0 || c.agent_pass_m[1] <= 0.0 {
+                continue;
+            }
+            ahead = true;
+            let enters = points
+                .iter()
+                .find(|q| q.s - s0 >= c.ego_pass_m[0])
+                .map(|q| q.t);
+            let (_, other_leaves) = choice::proceeding_interval(c, &self.params.interaction);
+            if enters.is_some_and(|t| t < other_leaves) {
+                return Some(Announcement::GoingFirst);
+            }
+        }
+        ahead.then_some(Announcement::GivingWay)
     }
 
     /// Distance, m, within which the ego must stop behind its car-following leader should the
@@ -640,12 +673,15 @@ impl DecisionCore {
     /// already past every such point, only the zones of lanes with traffic count (it stops
     /// where it blocks nobody now); when that is past stopping too, there is no point to yield
     /// at. It has cleared once past that conflict zone and every zone of its lane that begins
-    /// before that zone ends.
+    /// before that zone ends. An ego within the margin past a stop point stops where it is.
     fn yield_point(&self, s: f64, v: f64) -> (f64, f64, bool) {
         let p = &self.params;
         let margin = p.trajectory.stop_margin_m;
         let reach = v * v / (2.0 * p.interaction.comfort_decel_mps2);
-        let stoppable = |stop: f64| stop - s >= reach && stop > s;
+        // A stop point up to the margin behind the ego still keeps it out of the zone: it stops
+        // where it is (a creep that overshot a point by a centimetre must not turn into
+        // clearing the junction).
+        let stoppable = |stop: f64| stop + margin - s >= reach && stop + margin > s;
         let (mut stop, mut clear) = self
             .conflicts
             .pairs()
@@ -708,7 +744,7 @@ impl DecisionCore {
             }
             clear = further;
         }
-        (stop - s, clear - s, every_lane)
+        ((stop - s).max(0.0), clear - s, every_lane)
     }
 
     /// Distance through the nearest conflict zone ahead that a road user is in conflict

@@ -325,7 +325,9 @@ pub struct TrajectoryParams {
     pub vehicle_width_m: f64,
     /// Clearance added around every footprint, m.
     pub safety_margin_m: f64,
-    /// Growth of that clearance with prediction time (prediction uncertainty), m/s.
+    /// Growth of the other vehicles' footprint length with prediction time, m/s: where a
+    /// vehicle is along its path grows uncertain with time, where it is across its lane does
+    /// not.
     pub margin_growth_mps: f64,
     /// Stopping margin before a conflict zone, m.
     pub stop_margin_m: f64,

@@ -27,8 +27,6 @@ pub const MAX_STEPS: usize = 64;
 pub const MAX_POINTS: usize = MAX_STEPS + 1;
 /// Occupancy boxes per time step; on overflow boxes are merged conservatively.
 pub const MAX_BOXES: usize = 16;
-/// Consecutive time steps of a road user's passage whose boxes make one margin box.
-const MARGIN_CHUNK: usize = 4;
 /// Bins of the curvature speed-cap table.
 pub const VCAP_BINS: usize = 256;
 /// Largest overshoot of a quintic that brings a lateral speed u to rest over T with no change
@@ -171,13 +169,17 @@ pub enum Hit {
 }
 
 /// The other road user's predicted footprint behind an occupancy box: centre, heading
-/// (cos, sin) and the clearance added around its rectangle, m.
+/// (cos, sin), the clearance added around its rectangle and the growth of its length with
+/// the prediction time, m; `exact` when the box is the Minkowski sum of the two rectangles
+/// with that clearance (no narrow phase needed).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Footprint {
     pub centre: Vec2,
     pub cos: f64,
     pub sin: f64,
     pub clearance: f64,
+    pub grown: f64,
+    pub exact: bool,
 }
 
 /// Poses of the ego lane's reference line over the planning window, tabulated so that the
@@ -401,18 +403,46 @@ impl Occupancy {
                     hit = Hit::Margin;
                     continue;
                 }
-                let Some(f) = self.footprint[step][b] else {
-                    return Hit::Contact;
+                let f = match self.footprint[step][b] {
+                    Some(f) if !f.exact => f,
+                    _ => return Hit::Contact,
                 };
                 let (centre, c, s_) = *ego.get_or_insert_with(|| self.frame.pose(s, l));
                 let (hl, hw) = self.half;
-                let other = (hl + f.clearance, hw + f.clearance);
+                let other = (hl + f.grown + f.clearance, hw + f.clearance);
                 if rectangles_overlap(centre, (c, s_), (hl, hw), f.centre, (f.cos, f.sin), other) {
                     return Hit::Contact;
                 }
             }
         }
         hit
+    }
+
+    /// True when the ego centred at (s, l) at `step` overlaps another road user's predicted
+    /// rectangle itself, without clearance or growth (a merged box counts as overlapping).
+    pub fn collides(&self, step: usize, s: f64, l: f64) -> bool {
+        if !self.may_hit(step, s) {
+            return false;
+        }
+        let (hl, hw) = self.half;
+        (0..self.n[step] as usize).any(|b| {
+            !self.margin[step][b]
+                && s >= self.s_lo[step][b]
+                && s <= self.s_hi[step][b]
+                && l >= self.l_lo[step][b]
+                && l <= self.l_hi[step][b]
+                && self.footprint[step][b].is_none_or(|f| {
+                    let (centre, c, s_) = self.frame.pose(s, l);
+                    rectangles_overlap(
+                        centre,
+                        (c, s_),
+                        (hl, hw),
+                        f.centre,
+                        (f.cos, f.sin),
+                        (hl, hw),
+                    )
+                })
+        })
     }
 
     /// Boxes at `step`, as (s_lo, s_hi, l_lo, l_hi, margin).
@@ -645,8 +675,6 @@ pub struct Planner {
     /// end the horizon standing in one.
     zones: [[f64; 2]; MAX_CONFLICTS],
     n_zones: usize,
-    /// Scratch of one agent's boxes over the horizon and its post-encroachment margins.
-    sweep: [Option<[f64; 4]>; MAX_STEPS + 2 * MAX_SWEEP_STEPS],
     steps: usize,
     dt: f64,
     // Monte Carlo terminal states, structure of arrays.
@@ -671,7 +699,6 @@ impl Default for Planner {
             yielding: false,
             zones: [[0.0; 2]; MAX_CONFLICTS],
             n_zones: 0,
-            sweep: [None; MAX_STEPS + 2 * MAX_SWEEP_STEPS],
             steps: 0,
             dt: 0.1,
             end_t: [0.0; MAX_SAMPLES],
@@ -818,22 +845,37 @@ impl Planner {
                 .lane
                 .map(|l| morph.lane(l).segment_at(processes[j].s_m, 0))
                 .unwrap_or(0);
-            // The agent's box at every step. For the post-encroachment margins, its boxes while
-            // in its passage of the conflict zone are kept for the steps `behind` before the
-            // first and `ahead` after the last (before now, at its current speed), and each
-            // step also gets the union of those in its window [step − behind, step + ahead].
+            // The agent's box at every step, and for the post-encroachment margins when it is
+            // in its passage of the conflict zone (before now: at its current speed).
             let f = &forecasts[j];
             let window = |secs: f64| (libm::ceil(secs / self.dt) as usize).min(MAX_SWEEP_STEPS);
             let (behind, ahead) = (window(f.pet_s[0]), window(f.pet_s[1]));
             let total = behind + self.steps + ahead;
             let v = agent.speed();
+            let v_top = p.max_speed_mps.max(v);
+            let mut in_passage: Option<(usize, usize)> = None;
             // Predictions move at most a few segments per step: after the first global
             // projection, search only segments near the previous foot point.
             let mut near: Option<usize> = None;
             for i in 0..total {
-                self.sweep[i] = None;
                 let t = (i as f64 - behind as f64 + 1.0) * self.dt;
                 let forecast = if t > 0.0 { *f } else { Forecast::default() };
+                // In its passage at any moment of the step (a test at the step's end alone
+                // would shorten the margins by up to a step on each side).
+                let t_before = t - self.dt;
+                let before = if t_before > 0.0 {
+                    *f
+                } else {
+                    Forecast::default()
+                }
+                .travel(v, t_before, v_top);
+                if forecast.travel(v, t, v_top) >= f.pass_m[0] && before <= f.pass_m[1] {
+                    in_passage = Some(in_passage.map_or((i, i), |(a, _)| (a, i)));
+                }
+                let step = i.wrapping_sub(behind);
+                if step >= self.steps {
+                    continue;
+                }
                 let (pos, heading) = predict(
                     agent,
                     &processes[j],
@@ -856,76 +898,48 @@ impl Planner {
                 near = Some(fr.segment);
                 let rel = heading - fr.tangent;
                 let (c, s) = (fabs(cos(rel)), fabs(sin(rel)));
-                let margin = p.safety_margin_m + p.margin_growth_mps * t.max(0.0);
-                let ext_s = half_l + c * half_l + s * half_w + margin;
-                let ext_l = half_w + s * half_l + c * half_w + margin;
+                // The other's rectangle with the clearance, longer by the growth: what grows
+                // uncertain with time is where it is along its path, not across it (a car
+                // waiting beside a crossing lane is not in the way of its traffic later on).
+                let grown = p.margin_growth_mps * t.max(0.0);
+                let (other_l, other_w) = (half_l + grown, half_w);
+                let margin = p.safety_margin_m;
+                let ext_s = half_l + c * other_l + s * other_w + margin;
+                let ext_l = half_w + s * other_l + c * other_w + margin;
                 if fabs(fr.l) > lateral_reach + ext_l {
                     continue;
                 }
                 let b = [fr.s - ext_s, fr.s + ext_s, fr.l - ext_l, fr.l + ext_l];
-                let step = i.wrapping_sub(behind);
-                if step < self.steps {
-                    // The box is the exact Minkowski sum of the two rectangles where the lane
-                    // is straight across it and the headings are parallel or perpendicular;
-                    // elsewhere it is larger, and the rectangles decide.
-                    let bent = fabs(fr.l) + ext_l;
-                    let curved = [b[0], fr.s, b[1]]
-                        .iter()
-                        .any(|&q| lane.curvature_at(q, fr.segment) * bent > FRAME_EXACT_TOLERANCE);
-                    let footprint = (curved || c * s > FRAME_EXACT_TOLERANCE).then(|| Footprint {
-                        centre: pos,
-                        cos: cos(heading),
-                        sin: sin(heading),
-                        clearance: margin,
-                    });
-                    self.occupancy
-                        .add(step, b[0], b[1], b[2], b[3], false, footprint);
-                }
-                let along = forecast.travel(v, t, p.max_speed_mps.max(v));
-                if along >= f.pass_m[0] && along <= f.pass_m[1] {
-                    self.sweep[i] = Some(b);
-                }
+                // The box is the exact Minkowski sum of the two rectangles where the lane is
+                // straight across it and the headings are parallel or perpendicular;
+                // elsewhere it is larger, and the rectangles decide.
+                let bent = fabs(fr.l) + ext_l;
+                let curved = [b[0], fr.s, b[1]]
+                    .iter()
+                    .any(|&q| lane.curvature_at(q, fr.segment) * bent > FRAME_EXACT_TOLERANCE);
+                let footprint = Footprint {
+                    centre: pos,
+                    cos: cos(heading),
+                    sin: sin(heading),
+                    clearance: margin,
+                    grown,
+                    exact: !curved && c * s <= FRAME_EXACT_TOLERANCE,
+                };
+                self.occupancy
+                    .add(step, b[0], b[1], b[2], b[3], false, Some(footprint));
             }
-            if behind + ahead == 0 {
+            // Margins: the PET is measured on the passages, so from `ahead` before the agent
+            // enters its passage until `behind` after it has left it, the ego keeps its centre
+            // out of all of its own passage, at any lateral offset.
+            let Some((enters, leaves)) = in_passage.filter(|_| behind + ahead > 0) else {
                 continue;
-            }
-            // Margins: the in-passage boxes in chunks of consecutive steps (the union of a
-            // whole window would cover far more than the crossing where the agent's path is
-            // curved in the ego's frame), cut to the ego's passage; each step gets every chunk
-            // that overlaps its window [step, step + behind + ahead].
-            let mut k = 0;
-            while k < total {
-                if self.sweep[k].is_none() {
-                    k += 1;
-                    continue;
-                }
-                let first = k;
-                let mut u = self.sweep[k].expect("checked");
-                k += 1;
-                while k < total && k - first < MARGIN_CHUNK {
-                    let Some(b) = self.sweep[k] else {
-                        break;
-                    };
-                    u = [
-                        u[0].min(b[0]),
-                        u[1].max(b[1]),
-                        u[2].min(b[2]),
-                        u[3].max(b[3]),
-                    ];
-                    k += 1;
-                }
-                let last = k - 1;
-                let (s_lo, s_hi) = (
-                    u[0].max(self.start.s + f.ego_pass_m[0]),
-                    u[1].min(self.start.s + f.ego_pass_m[1]),
-                );
-                if s_lo > s_hi {
-                    continue;
-                }
-                let steps = first.saturating_sub(behind + ahead)..=last.min(self.steps - 1);
-                for step in steps {
-                    self.occupancy.add(step, s_lo, s_hi, u[2], u[3], true, None);
-                }
+            };
+            let (s_lo, s_hi) = (s0 + f.ego_pass_m[0], s0 + f.ego_pass_m[1]);
+            let steps = enters.saturating_sub(behind + ahead)..=leaves.min(self.steps - 1);
+            let reach = lateral_reach + half_w;
+            for step in steps {
+                self.occupancy
+                    .add(step, s_lo, s_hi, -reach, reach, true, None);
             }
         }
     }
@@ -1066,13 +1080,31 @@ impl Planner {
     /// Time of the first predicted contact with a footprint along a rendered trajectory, s
     /// (`None`: none within the horizon).
     pub fn first_contact(&self, trajectory: &Trajectory) -> Option<f64> {
+        self.first(trajectory, |step, q| {
+            self.occupancy.hit(step, q.s, q.l) == Hit::Contact
+        })
+    }
+
+    /// Time of the first predicted collision along a rendered trajectory, the rectangles
+    /// themselves overlapping ([`Occupancy::collides`]), s (`None`: none within the horizon).
+    pub fn first_collision(&self, trajectory: &Trajectory) -> Option<f64> {
+        self.first(trajectory, |step, q| {
+            self.occupancy.collides(step, q.s, q.l)
+        })
+    }
+
+    fn first(
+        &self,
+        trajectory: &Trajectory,
+        meets: impl Fn(usize, &TrajectoryPoint) -> bool,
+    ) -> Option<f64> {
         trajectory
             .points()
             .iter()
             .skip(1)
             .take(self.steps)
             .enumerate()
-            .find(|(step, q)| self.occupancy.hit(*step, q.s, q.l) == Hit::Contact)
+            .find(|(step, q)| meets(*step, q))
             .map(|(_, q)| q.t)
     }
 
@@ -1335,7 +1367,10 @@ impl Planner {
     /// The minimum-risk fallback into `out`: brake ([`Planner::minimum_risk`]), enough to stop
     /// before the yield point `stop_distance` m ahead if possible. Braking where the ego
     /// stands can be the worst choice inside a junction, in the path of crossing traffic: when
-    /// braking is predicted to be hit, the dynamically feasible candidate around one of
+    /// braking is predicted to be hit (the footprints themselves overlapping, not just the
+    /// clearance around them: a car waiting beside a crossing lane is not in its traffic's
+    /// way, and driving on from there would squeeze in behind a passing car), the
+    /// dynamically feasible candidate around one of
     /// `drive_on` (profiles that hold or gain speed) that postpones the first predicted
     /// contact longest is taken instead, if it does (it leaves the others the most time to
     /// react); when braking would end standing inside a conflict zone, one free of predicted
@@ -1354,7 +1389,7 @@ impl Planner {
         out: &mut Trajectory,
     ) -> Option<usize> {
         self.minimum_risk(stop_distance, lane, p, out);
-        let contact = self.first_contact(out);
+        let contact = self.first_collision(out);
         let stands_in_zone = out.points().last().is_some_and(|q| self.in_zone(q.s));
         if contact.is_none() && !stands_in_zone {
             return None;

@@ -628,7 +628,8 @@ fn a_rolling_decelerate_candidate_can_always_still_stop_before_the_zone() {
 fn inside_the_junction_the_fallback_drives_on_rather_than_brake_into_contact() {
     // The CAV inside the junction, just before its crossing with the HDV's lane, and the HDV
     // (which does not give way to a car standing in its path) arriving at every distance:
-    // when braking is predicted to be hit, the fallback drives on whenever a drive-on
+    // when braking is predicted to be hit (the footprints overlapping), the fallback drives
+    // on whenever a drive-on
     // candidate is within the limits, also where its contact would come sooner; and it never
     // stands inside a conflict zone when a plan that clears it free of contact exists.
     let p = Params::default();
@@ -663,7 +664,7 @@ fn inside_the_junction_the_fallback_drives_on_rather_than_brake_into_contact() {
             let mut braking = concord_core::Trajectory::default();
             planner.minimum_risk(planner.yield_distance, &lane, &p.trajectory, &mut braking);
             let (Some(t_brake), Some(t_drive)) = (
-                planner.first_contact(&braking),
+                planner.first_collision(&braking),
                 drive_on.into_iter().flatten().reduce(f64::max),
             ) else {
                 continue;
@@ -1169,13 +1170,15 @@ fn a_footprint_overlapping_another_is_kept_and_a_point_in_it_is_a_contact() {
     assert_eq!(planner.occupancy.hit(0, back + 0.1, 0.0), Hit::Contact);
     assert_eq!(planner.occupancy.hit(0, 28.5, 0.0), Hit::Contact);
     assert_eq!(planner.occupancy.hit(0, 10.0, 0.0), Hit::Free);
-    // Each box is the Minkowski sum of two cars aligned with the lane, with the clearance
-    // at the first step (t = dt): half-extents length + margin along, width + margin across.
+    // Each box is the Minkowski sum of two cars aligned with the lane, with the clearance,
+    // the other's length grown for the first step (t = dt): half-extents length + clearance +
+    // growth along, width + clearance across.
     let p = Params::default().trajectory;
-    let margin = p.safety_margin_m + p.margin_growth_mps * p.dt_s;
+    let grown = p.margin_growth_mps * p.dt_s;
     for (s_lo, s_hi, l_lo, l_hi, _) in boxes {
-        assert!(((s_hi - s_lo) / 2.0 - (p.vehicle_length_m + margin)).abs() < 1e-6);
-        assert!(((l_hi - l_lo) / 2.0 - (p.vehicle_width_m + margin)).abs() < 1e-6);
+        let along = p.vehicle_length_m + p.safety_margin_m + grown;
+        assert!(((s_hi - s_lo) / 2.0 - along).abs() < 1e-6);
+        assert!(((l_hi - l_lo) / 2.0 - (p.vehicle_width_m + p.safety_margin_m)).abs() < 1e-6);
     }
 }
 

@@ -16,7 +16,7 @@ use concord_core::scene::{
     paper, AgentState, BuiltIn, ConflictKind, ExplicitIntent, History, IntentAction, Morphology,
     ProcessState, Rated, RightOfWay, Vec2, MAX_AGENTS,
 };
-use concord_core::trajectory::{Forecast, FrenetState, Planner, Reject};
+use concord_core::trajectory::{Forecast, FrenetState, Hit, Planner, Reject};
 use concord_core::{DecisionCore, Scene};
 
 /// A conflict with the ego's and the other's passages at `ego` and `other` (distances from
@@ -850,4 +850,203 @@ fn the_minimum_risk_stop_ends_behind_a_standing_leader() {
     let end = d.trajectory.points().last().unwrap();
     assert!(end.speed < 1e-9, "{end:?}");
     assert!(end.s <= 19.0 - p.trajectory.vehicle_length_m, "{end:?}");
+}
+
+/// Two straight lanes crossing at the origin: the ego's along +x from (−60, 0), 4 m wide,
+/// and a narrow one along +y from (0, −60), 2.4 m wide (a 2 m car in it keeps 0.2 m of its
+/// band on each side), each with its stop line 50 m in.
+fn plain_crossing() -> Morphology {
+    use concord_core::scene::{Lane, Turn};
+    let lane = |from: Vec2, to: Vec2, half_width: f64| {
+        Lane::builder(from)
+            .line_to(to)
+            .build(half_width, 50.0, Turn::Straight)
+            .unwrap()
+    };
+    Morphology::new(&[
+        lane(Vec2::new(-60.0, 0.0), Vec2::new(60.0, 0.0), 2.0),
+        lane(Vec2::new(0.0, -60.0), Vec2::new(0.0, 60.0), 1.2),
+    ])
+    .unwrap()
+}
+
+/// A planner on [`plain_crossing`]'s first lane, the ego standing with its centre at `x`,
+/// with `agents` (predicted straight on at their speeds) and `forecasts`.
+fn standing_at(x: f64, agents: &[AgentState], forecasts: &[Forecast; MAX_AGENTS]) -> Planner {
+    let morph = plain_crossing();
+    let mut planner = Planner::default();
+    planner.prepare(
+        0,
+        FrenetState {
+            s: 60.0 + x,
+            ..FrenetState::default()
+        },
+        50.0,
+        agents,
+        &[ProcessState::default(); MAX_AGENTS],
+        forecasts,
+        &morph,
+        &Params::default().trajectory,
+    );
+    planner
+}
+
+/// The ego's front `gap` m from the side of a car driving along the crossing lane at 8 m/s,
+/// passing the ego after `t` s.
+fn beside_a_passing_car(gap: f64, t: f64) -> (f64, [AgentState; 1]) {
+    let p = Params::default().trajectory;
+    let x = -(0.5 * p.vehicle_width_m + gap + 0.5 * p.vehicle_length_m);
+    let car = AgentState::moving(
+        1,
+        Vec2::new(0.0, -8.0 * t),
+        core::f64::consts::FRAC_PI_2,
+        8.0,
+    );
+    (x, [car])
+}
+
+#[test]
+fn a_car_waiting_beside_a_crossing_lane_stays_out_of_its_traffics_way() {
+    // The ego's front 0.9 m from the side of the crossing lane's car (outside its lane's
+    // band), which passes after 2.5 s: more than the 0.5 m clearance. The uncertainty that grows with prediction time
+    // is the car's place along its lane, not across it, so standing there is no contact at
+    // any step (grown across as well, it would be from 2 s on).
+    let (x, car) = beside_a_passing_car(0.9, 2.5);
+    let planner = standing_at(x, &car, &[Forecast::default(); MAX_AGENTS]);
+    let p = Params::default().trajectory;
+    let stand = planner.evaluate(1.0, 0.0, 0.0, &p);
+    assert!(stand.is_ok(), "{stand:?}");
+    let steps = (p.horizon_s / p.dt_s) as usize;
+    let s = planner.start.s;
+    assert!((0..steps).all(|k| planner.occupancy.hit(k, s, 0.0) == Hit::Free));
+}
+
+#[test]
+fn the_fallback_drives_on_only_when_braking_itself_would_be_hit() {
+    // The ego standing with its front 0.3 m from a crossing car's side (outside its lane's
+    // band, inside the clearance around the car, not touching) as the car passes after 4 s:
+    // braking is a contact only by
+    // the clearance, so the fallback keeps braking instead of driving out ahead of the car
+    // (which a contact-free candidate could). With the footprints overlapping it drives on.
+    let p = Params::default().trajectory;
+    let lane = *plain_crossing().lane(0);
+    let go = Profile {
+        accel: 3.0,
+        target_speed: 10.0,
+        duration: 3.0,
+        stop_m: f64::INFINITY,
+    };
+    let fallback = |gap: f64| {
+        let (x, car) = beside_a_passing_car(gap, 4.0);
+        let mut planner = standing_at(x, &car, &[Forecast::default(); MAX_AGENTS]);
+        let mut out = concord_core::Trajectory::default();
+        let braking = {
+            let mut b = concord_core::Trajectory::default();
+            planner.minimum_risk(f64::INFINITY, &lane, &p, &mut b);
+            (planner.first_contact(&b), planner.first_collision(&b))
+        };
+        (
+            planner.fallback(0.0, &lane, &[go], 1, &p, &mut out),
+            braking,
+        )
+    };
+    let (taken, (contact, collision)) = fallback(0.3);
+    assert!(
+        contact.is_some() && collision.is_none(),
+        "{contact:?} {collision:?}"
+    );
+    assert_eq!(taken, None, "kept braking");
+    let (taken, (_, collision)) = fallback(-0.3);
+    assert!(collision.is_some());
+    assert_eq!(taken, Some(0), "drove on");
+}
+
+#[test]
+fn the_margins_keep_the_ego_out_of_its_whole_passage() {
+    // A car crossing at 8 m/s leaves its passage (±4 m around the crossing) after 1 s. The
+    // ego's passage is ±6 m around it; the ego entering its first metre 1 s after the car
+    // left (less than pet_behind_s) is refused, though the car's own box does not reach
+    // there; entering 2 s after the car left is allowed.
+    let ip = Params::default().interaction;
+    let car = AgentState::moving(1, Vec2::new(0.0, -4.0), core::f64::consts::FRAC_PI_2, 8.0);
+    let mut forecasts = [Forecast::default(); MAX_AGENTS];
+    let x = -10.0;
+    forecasts[0] = Forecast {
+        pet_s: [ip.pet_behind_s, ip.pet_go_s],
+        pass_m: [0.0, 8.0],
+        ego_pass_m: [-6.0 - x, 6.0 - x],
+        ..Forecast::default()
+    };
+    let planner = standing_at(x, &[car], &forecasts);
+    let p = Params::default().trajectory;
+    // From standing, a quartic to v over T (no acceleration at either end) covers v·T/2: with
+    // v = 9/T it is at −5.5 m, in its passage, at T.
+    let reaching = |t_end: f64| planner.evaluate(t_end, 9.0 / t_end, 0.0, &p);
+    let early = reaching(2.5); // in the passage from about 2.4 s; the car left at 1 s
+    assert!(matches!(early, Err(Reject::Collision(_))), "{early:?}");
+    let late = reaching(3.2); // from about 3.1 s
+    assert!(late.is_ok(), "{late:?}");
+}
+
+/// The paper's CAV `cav_before` m before its crossing with the HDV's lane at `cav_speed`
+/// m/s (its centre relative to the start of its passage, the zone), the HDV `hdv_before` m
+/// before its own passage at 10 m/s.
+fn before_the_crossing(cav_before: f64, cav_speed: f64, hdv_before: f64) -> (DecisionCore, Scene) {
+    let core = paper_core(Params::default());
+    let m = *core.morphology();
+    let c = m.conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT).unwrap();
+    let (cav, h_cav, _) = m.lane(paper::CAV_LEFT).pose_at(c.zone_a[0] - cav_before, 0);
+    let (hdv, h_hdv, _) = m
+        .lane(paper::HDV_STRAIGHT)
+        .pose_at(c.zone_b[0] - hdv_before, 0);
+    let mut scene = Scene::new(
+        0.0,
+        AgentState::moving(0, cav, h_cav, cav_speed),
+        paper::CAV_LEFT,
+    );
+    scene.push(AgentState::moving(1, hdv, h_hdv, 10.0));
+    (core, scene)
+}
+
+#[test]
+fn the_ehmi_says_going_first_only_when_the_plan_goes_before_the_other() {
+    use concord_core::Announcement;
+    // The HDV at its passage now, the CAV 25 m back at 8 m/s: whatever it does, it passes
+    // behind, so it tells the HDV to go ahead, also when it does not slow down.
+    let (mut core, scene) = before_the_crossing(25.0, 8.0, 1.0);
+    let d = core.step(&scene, 0.0, None).unwrap();
+    assert!(!d.maneuver.gives_way(), "{:?}", d.maneuver);
+    assert_eq!(d.announce, Announcement::GivingWay, "{:?}", d.maneuver);
+    // The CAV 3 m before its passage at 8 m/s, the HDV 30 m away: the CAV goes first.
+    let (mut core, scene) = before_the_crossing(3.0, 8.0, 30.0);
+    let d = core.step(&scene, 0.0, None).unwrap();
+    assert_eq!(d.announce, Announcement::GoingFirst, "{:?}", d.maneuver);
+}
+
+#[test]
+fn an_ego_that_crept_just_past_its_waiting_point_waits_there() {
+    // Creeping at 0.1 m/s, the CAV's centre 0.6 m before its passage (0.4 m past the point
+    // the stop margin puts 1 m before it), the HDV 8 m before its own: the CAV still has a
+    // point to yield at, where it is, and waits (it does not take the zone in front of the
+    // HDV as one it must clear).
+    let (mut core, scene) = before_the_crossing(0.6, 0.1, 8.0);
+    let d = core.step(&scene, 0.0, None).unwrap();
+    assert_eq!(core.planner().yield_distance, 0.0);
+    assert_eq!(d.source, concord_core::DecisionSource::Logit, "{d:?}");
+    // The HDV clears its passage after about 1.9 s; the CAV keeps out of its own until then
+    // and pet_behind_s after.
+    let c = core
+        .morphology()
+        .conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT)
+        .unwrap();
+    let wait = 1.9 + Params::default().interaction.pet_behind_s;
+    for q in d.trajectory.points().iter().filter(|q| q.t <= wait) {
+        assert!(
+            q.s < c.zone_a[0],
+            "at {} m after {} s, the zone from {} m",
+            q.s,
+            q.t,
+            c.zone_a[0]
+        );
+    }
 }

@@ -50,9 +50,9 @@ impl Language {
 /// What a decision means for the others: the car gives way, or it goes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Stance {
-    /// Decelerating or stopping: the others may go.
+    /// Stopping, waiting, or passing behind the others: they may go.
     Yielding,
-    /// Accelerating, keeping speed or turning: the car goes first.
+    /// The car goes first.
     Proceeding,
 }
 
@@ -62,11 +62,22 @@ pub struct Executed {
     pub maneuver: Maneuver,
     /// The minimum-risk fallback: the car stops.
     pub stopping: bool,
+    /// The core announces that the car gives way (its plan waits for, or passes behind, every
+    /// road user in conflict with it; `Decision::announce`), whatever the maneuver.
+    pub gives_way: bool,
 }
 
 impl Executed {
+    /// What `maneuver` announces by itself: decelerating gives way, the rest goes first.
+    pub fn of(maneuver: Maneuver, stopping: bool) -> Self {
+        Executed {
+            maneuver,
+            stopping,
+            gives_way: maneuver.gives_way(),
+        }
+    }
     pub fn stance(self) -> Stance {
-        if self.stopping || self.maneuver.gives_way() {
+        if self.stopping || self.gives_way {
             Stance::Yielding
         } else {
             Stance::Proceeding
@@ -141,8 +152,10 @@ const YIELD_CLAIMS: [&str; 14] = [
 ];
 
 /// Phrases that claim the car goes first.
-const PROCEED_CLAIMS: [&str; 13] = [
+const PROCEED_CLAIMS: [&str; 15] = [
     "i am going",
+    "to go first",
+    "for waiting",
     "i'm going",
     "going first",
     "i will go",
@@ -237,6 +250,26 @@ pub fn template(executed: Executed, style: Option<Style>) -> &'static str {
     if executed.stopping {
         return "Stopping. Please go ahead carefully.";
     }
+    // A plan against what its maneuver says by itself: passing behind the others, or going
+    // first while slowing a little.
+    match (executed.stance(), executed.maneuver) {
+        (Stance::Yielding, Maneuver::Accelerate) => {
+            return "Please go ahead; I am speeding up behind you."
+        }
+        (Stance::Yielding, Maneuver::KeepSpeed) => {
+            return "Please go ahead; I am keeping my speed behind you."
+        }
+        (Stance::Yielding, Maneuver::TurnLeft) => {
+            return "Please go ahead; I am turning left after you."
+        }
+        (Stance::Yielding, Maneuver::TurnRight) => {
+            return "Please go ahead; I am turning right after you."
+        }
+        (Stance::Proceeding, Maneuver::Decelerate) => {
+            return "Going first, a little slower; please wait."
+        }
+        _ => {}
+    }
     match (executed.maneuver, style) {
         (Maneuver::Decelerate, Some(Aggressive)) => "Slowing down. Go ahead.",
         (Maneuver::Decelerate, Some(Conservative)) => {
@@ -270,6 +303,24 @@ pub fn template(executed: Executed, style: Option<Style>) -> &'static str {
 pub fn describe(executed: Executed) -> &'static str {
     if executed.stopping {
         return "is stopping for safety; others may pass with care";
+    }
+    match (executed.stance(), executed.maneuver) {
+        (Stance::Yielding, Maneuver::Accelerate) => {
+            return "lets the crossing traffic go first and speeds up behind it"
+        }
+        (Stance::Yielding, Maneuver::KeepSpeed) => {
+            return "lets the crossing traffic go first and keeps its speed behind it"
+        }
+        (Stance::Yielding, Maneuver::TurnLeft) => {
+            return "lets the crossing traffic go first and turns left after it"
+        }
+        (Stance::Yielding, Maneuver::TurnRight) => {
+            return "lets the crossing traffic go first and turns right after it"
+        }
+        (Stance::Proceeding, Maneuver::Decelerate) => {
+            return "slows a little but passes first; others should wait"
+        }
+        _ => {}
     }
     match executed.maneuver {
         Maneuver::Decelerate => "is slowing down to let the crossing traffic go first",
@@ -346,9 +397,14 @@ pub fn own_vocabulary() -> &'static BTreeSet<String> {
         ];
         let mut own: BTreeSet<String> = COMMON_WORDS.iter().map(|w| fold(w)).collect();
         for maneuver in Maneuver::ALL {
-            for stopping in [false, true] {
+            for (stopping, gives_way) in [(false, false), (false, true), (true, true)] {
                 for style in styles {
-                    own.extend(words(template(Executed { maneuver, stopping }, style)));
+                    let e = Executed {
+                        maneuver,
+                        stopping,
+                        gives_way,
+                    };
+                    own.extend(words(template(e, style)));
                 }
             }
             for phrase in maneuver_vocabulary(maneuver) {
@@ -544,10 +600,7 @@ mod tests {
     const EN: Language = Language::En;
 
     fn doing(maneuver: Maneuver) -> Executed {
-        Executed {
-            maneuver,
-            stopping: false,
-        }
+        Executed::of(maneuver, false)
     }
 
     fn nobody() -> Heard {
@@ -619,10 +672,7 @@ mod tests {
             ),
             Ok(())
         );
-        let stopping = Executed {
-            maneuver: Maneuver::Decelerate,
-            stopping: true,
-        };
+        let stopping = Executed::of(Maneuver::Decelerate, true);
         assert_eq!(check("Stopping here, go ahead.", stopping, EN, &h), Ok(()));
     }
 
@@ -699,16 +749,31 @@ mod tests {
     #[test]
     fn every_template_passes_its_own_check_in_every_tone_and_names_its_maneuver() {
         for maneuver in Maneuver::ALL {
-            for stopping in [false, true] {
+            for (stopping, gives_way) in [(false, false), (false, true), (true, true)] {
                 for style in [
                     None,
                     Some(Style::Aggressive),
                     Some(Style::Balanced),
                     Some(Style::Conservative),
                 ] {
-                    let e = Executed { maneuver, stopping };
+                    let e = Executed {
+                        maneuver,
+                        stopping,
+                        gives_way,
+                    };
                     let t = template(e, style);
                     assert_eq!(check(t, e, EN, &nobody()), Ok(()), "{t}");
+                    let other = Executed {
+                        gives_way: !gives_way,
+                        ..e
+                    };
+                    if !stopping {
+                        assert_eq!(
+                            check(t, other, EN, &nobody()),
+                            Err(Refusal::Contradicts),
+                            "{t} also says the opposite"
+                        );
+                    }
                 }
             }
         }

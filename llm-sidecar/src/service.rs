@@ -28,7 +28,7 @@ use std::sync::{mpsc as std_mpsc, Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use concord_core::scene::{IntentAction, Style};
-use concord_core::{DecisionSource, Maneuver};
+use concord_core::{Announcement, DecisionSource, Maneuver};
 use concord_ipc::clock::now_ns;
 use concord_ipc::wire::{
     AdviceFailure, AdviceRequest, Audience, EhmiKind, EhmiMessage, IntentText, TextSource,
@@ -149,12 +149,13 @@ fn situation(r: &AdviceRequest) -> (usize, Vec<u32>, u8, u8) {
     (favourite, risky, r.ego_intent.action, r.ego_intent.task)
 }
 
-/// The decision `d` executes (a minimum-risk decision stops).
+/// The decision `d` executes (a minimum-risk decision stops) and what it announces.
 fn executed_of(d: &WireDecision) -> Option<Executed> {
     let (maneuver, source, _, _) = d.decode()?;
     Some(Executed {
         maneuver,
         stopping: source == DecisionSource::MinimumRisk,
+        gives_way: Announcement::try_from(d.announce).ok()? == Announcement::GivingWay,
     })
 }
 
@@ -632,13 +633,15 @@ impl Sidecar {
     /// when it arrives and passes the check while the decision still holds, follows.
     pub async fn ehmi_worker(&self, mut rx: watch::Receiver<Option<WireDecision>>) {
         let repeat = Duration::from_secs_f64(self.cfg.ehmi.repeat_s);
-        // The decision announced last (maneuver, stopping), when, and the model's text for it.
-        let mut last: Option<(Maneuver, bool, Instant)> = None;
+        // The decision announced last, when, and the model's text for it.
+        let mut last: Option<(Executed, Instant)> = None;
         let mut phrased: Option<String> = None;
-        // Phrasings by (maneuver, stopping, tone): each is asked for once; accepted ones kept.
-        let mut known: BTreeMap<(u8, bool, &'static str), String> = BTreeMap::new();
+        // Phrasings by (maneuver, giving way, stopping, tone): each is asked for once; accepted
+        // ones kept.
+        type Key = (u8, bool, bool, &'static str);
+        let mut known: BTreeMap<Key, String> = BTreeMap::new();
         let mut tried = std::collections::BTreeSet::new();
-        let mut asked: Option<(u8, bool, &'static str)> = None;
+        let mut asked: Option<Key> = None;
         let mut phrasing: Option<Phrasing<'_>> = None;
         loop {
             let pending = async {
@@ -654,23 +657,22 @@ impl Sidecar {
                     }
                     let Some(d) = *rx.borrow_and_update() else { continue };
                     let Some(executed) = executed_of(&d) else { continue };
-                    let Executed { maneuver, stopping } = executed;
                     let now = Instant::now();
-                    let changed = last.is_none_or(|(m, st, _)| m != maneuver || st != stopping);
-                    let due = changed || last.is_some_and(|(_, _, t)| now.duration_since(t) >= repeat);
+                    let changed = last.is_none_or(|(e, _)| e != executed);
+                    let due = changed || last.is_some_and(|(_, t)| now.duration_since(t) >= repeat);
                     let style = {
                         let mut s = self.state();
                         s.decision = Some(d);
                         self.note_verdict(&mut s, &d);
                         self.addressed_style(&s)
                     };
-                    let key = (maneuver as u8, stopping, ehmi::tone(style));
+                    let key = (executed.maneuver as u8, executed.stance() == ehmi::Stance::Yielding, executed.stopping, ehmi::tone(style));
                     if changed {
                         phrased = known.get(&key).cloned();
                         phrasing = None;
                     }
                     if due {
-                        last = Some((maneuver, stopping, now));
+                        last = Some((executed, now));
                         let text = {
                             let s = self.state();
                             let lang = self.cfg.ehmi.language;
@@ -678,8 +680,8 @@ impl Sidecar {
                         };
                         self.announce(&text);
                     }
-                    if changed && self.cfg.ehmi.llm_phrasing && !stopping && tried.insert(key) {
-                        let messages = prompt::phrase_messages(ehmi::describe(executed), key.2);
+                    if changed && self.cfg.ehmi.llm_phrasing && !executed.stopping && tried.insert(key) {
+                        let messages = prompt::phrase_messages(ehmi::describe(executed), key.3);
                         asked = Some(key);
                         phrasing = Some(Box::pin(self.phrase("ehmi", messages)));
                     }
@@ -687,8 +689,8 @@ impl Sidecar {
                 }
                 result = pending => {
                     phrasing = None;
-                    let Some((maneuver, stopping, _)) = last else { continue };
-                    let executed = Executed { maneuver, stopping };
+                    let Some((executed, _)) = last else { continue };
+                    let stopping = executed.stopping;
                     // A failed phrasing was counted and logged: the template stays.
                     let Ok(text) = result else { continue };
                     let text = text.trim().to_string();
@@ -707,7 +709,7 @@ impl Sidecar {
                             s.counters.ehmi_replaced += 1;
                             let reason = verdict.err().map_or("stopping".into(), |r| format!("{r:?}"));
                             let line = json!({"kind": "ehmi_refused", "audience": "broadcast",
-                                              "maneuver": maneuver.name(), "proposed": text,
+                                              "maneuver": executed.maneuver.name(), "proposed": text,
                                               "reason": reason});
                             s.log.write(&line);
                         }

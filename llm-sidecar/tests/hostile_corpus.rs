@@ -196,7 +196,13 @@ fn every_intent() -> Vec<WireIntent> {
 fn executions() -> Vec<Executed> {
     Maneuver::ALL
         .iter()
-        .flat_map(|&maneuver| [false, true].map(|stopping| Executed { maneuver, stopping }))
+        .flat_map(|&maneuver| {
+            [(false, false), (false, true), (true, true)].map(|(stopping, gives_way)| Executed {
+                maneuver,
+                stopping,
+                gives_way,
+            })
+        })
         .collect()
 }
 
