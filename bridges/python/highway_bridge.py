@@ -137,6 +137,7 @@ episode's outcome.
 """
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -702,6 +703,92 @@ class OthersMonitor:
         self.prev = cur
 
 
+class ImposedBraking:
+    """The braking the ego imposes on other vehicles: each frame, a vehicle's braking counts
+    when the ego is the reason for it, by highway-env's own rules, and its acceleration with
+    the ego is below the one without (the simulator's analogue of the braking the core's
+    courtesy rule bounds; braking for other vehicles, which highway-env's regulation makes
+    hard and frequent, is left out):
+
+    * the ego is its leader (``road.neighbour_vehicles`` on its lane finds the ego first, as
+      its IDM does): the IDM acceleration with the ego as leader against the one with its
+      next leader;
+    * it yields to the ego: ``RegulatedRoad`` made it yield (target speed 0) at an enforcement
+      where a conflict with the ego was possible and it, not the ego, had to give way: the IDM
+      acceleration yielding against the one at its lane's speed limit.
+
+    Braking in the episode's first step (``t`` = 0) is left out: it answers where the
+    environment placed the ego (close in front of a follower, say), not anything it did. It
+    patches ``IDMVehicle.act`` and ``RegulatedRoad.enforce_road_rules`` while ``attached``
+    (the same arithmetic first, the vehicles' own calls after: the simulation is unchanged)."""
+
+    def __init__(self):
+        self.max_decel = 0.0
+        self.max_decel_t = None
+        self.t = 0.0
+        self.road = None
+        self.ego = None
+
+    @contextlib.contextmanager
+    def attached(self, u):
+        from highway_env.road.regulation import RegulatedRoad
+        from highway_env.vehicle.behavior import IDMVehicle
+
+        self.road, self.ego = u.road, u.vehicle
+        monitor = self
+        orig_act = IDMVehicle.__dict__["act"]
+        orig_enforce = RegulatedRoad.__dict__["enforce_road_rules"]
+
+        def act(v, action=None):
+            if v.road is monitor.road and not v.crashed:
+                monitor.weigh(v)
+            return orig_act(v, action)
+
+        def enforce(road):
+            orig_enforce(road)
+            if road is monitor.road:
+                ego = monitor.ego
+                for v in road.vehicles:
+                    yielding = getattr(v, "is_yielding", False)
+                    if yielding and v.yield_timer == 0:
+                        v.yields_to_ego = bool(
+                            RegulatedRoad.is_conflict_possible(v, ego)
+                            and RegulatedRoad.respect_priorities(v, ego) is v)
+                    elif not yielding:
+                        v.yields_to_ego = False
+
+        IDMVehicle.act = act
+        RegulatedRoad.enforce_road_rules = enforce
+        try:
+            yield self
+        finally:
+            IDMVehicle.act = orig_act
+            RegulatedRoad.enforce_road_rules = orig_enforce
+
+    def weigh(self, v):
+        ego, road = self.ego, self.road
+        front, rear = road.neighbour_vehicles(v, v.lane_index)
+        yields = getattr(v, "is_yielding", False) and getattr(v, "yields_to_ego", False)
+        if front is not ego and not yields:
+            return
+        clip = lambda a: float(np.clip(a, -v.ACC_MAX, v.ACC_MAX))  # noqa: E731
+        with_ego = clip(v.acceleration(ego_vehicle=v, front_vehicle=front, rear_vehicle=rear))
+        others = road.vehicles
+        road.vehicles = [x for x in others if x is not ego]
+        target = v.target_speed
+        try:
+            front2, rear2 = road.neighbour_vehicles(v, v.lane_index)
+            if yields:
+                v.target_speed = v.lane.speed_limit
+            without = clip(v.acceleration(ego_vehicle=v, front_vehicle=front2, rear_vehicle=rear2))
+        finally:
+            road.vehicles = others
+            v.target_speed = target
+        if (self.t > 0.0 and with_ego < 0.0 and with_ego < without - 1e-6
+                and -with_ego > self.max_decel):
+            self.max_decel, self.max_decel_t = -with_ego, self.t
+
+
 def outcome_kind(e):
     """How an episode ended: a collision, an arrival, Concord's decision timeout or the time
     limit (the environment's duration or the bridge's own)."""
@@ -725,6 +812,7 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
     crashed = arrived = False
     standing_steps = 0
     monitor = OthersMonitor(u, period)
+    imposed = ImposedBraking()
     limit = spec["time_limit_s"]
     discrete = None if name == "concord" else u.action_type.actions_indexes[DISCRETE[name]]
     while True:
@@ -741,7 +829,9 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
             maneuvers[m] = maneuvers.get(m, 0) + 1
         else:
             action = discrete
-        obs, _, terminated, truncated, info = env.step(action)
+        imposed.t = steps * period
+        with imposed.attached(u):
+            obs, _, terminated, truncated, info = env.step(action)
         steps += 1
         speeds.append(float(u.vehicle.speed))
         if float(u.vehicle.speed) < STANDING_SPEED_MPS:
@@ -774,6 +864,9 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
         # Largest deceleration of another vehicle near the ego (OthersMonitor), m/s², and when.
         "others_max_decel_mps2": monitor.max_decel,
         "others_max_decel_t_s": monitor.max_decel_t,
+        # Largest braking the ego imposed on another vehicle (ImposedBraking), m/s², and when.
+        "imposed_decel_mps2": imposed.max_decel,
+        "imposed_decel_t_s": imposed.max_decel_t,
         # Smallest centre-to-centre distance between the ego and another vehicle, m (None: the
         # ego was alone).
         "min_distance_m": None if math.isinf(monitor.min_distance) else monitor.min_distance,
@@ -787,6 +880,7 @@ def summarize(env_name, name, episodes):
     steps = sum(e["steps"] for e in episodes)
     standing = [e["standing_s"] for e in episodes]
     decel = [e["others_max_decel_mps2"] for e in episodes]
+    imposed = [e["imposed_decel_mps2"] for e in episodes]
     dist = [e["min_distance_m"] for e in episodes if e["min_distance_m"] is not None]
     return {
         "env": env_name,
@@ -807,6 +901,11 @@ def summarize(env_name, name, episodes):
             "mean_of_episode_max_mps2": float(np.mean(decel)),
             "episodes_harder_than_threshold": sum(d > HARD_BRAKING_MPS2 for d in decel),
             "threshold_mps2": HARD_BRAKING_MPS2, "near_ego_m": NEAR_EGO_M},
+        "imposed_braking": {
+            "max_mps2": float(np.max(imposed)),
+            "mean_of_episode_max_mps2": float(np.mean(imposed)),
+            "episodes_harder_than_threshold": sum(d > HARD_BRAKING_MPS2 for d in imposed),
+            "threshold_mps2": HARD_BRAKING_MPS2},
         "min_distance_m": {"min": float(np.min(dist)) if dist else None,
                            "median": float(np.median(dist)) if dist else None},
     }
@@ -858,6 +957,10 @@ def detail_lines(s):
         f"others' braking within {b['near_ego_m']:.0f} m of the ego: max {b['max_mps2']:.2f} "
         f"m/s², mean of episode maxima {b['mean_of_episode_max_mps2']:.2f} m/s², episodes "
         f"harder than {b['threshold_mps2']:.0f} m/s²: {b['episodes_harder_than_threshold']}",
+        f"braking the ego imposed (leader or regulation): max {s['imposed_braking']['max_mps2']:.2f} "
+        f"m/s², mean of episode maxima {s['imposed_braking']['mean_of_episode_max_mps2']:.2f} "
+        f"m/s², episodes harder than {s['imposed_braking']['threshold_mps2']:.0f} m/s²: "
+        f"{s['imposed_braking']['episodes_harder_than_threshold']}",
     ]
     if d["min"] is not None:
         lines.append(f"closest other vehicle (centre to centre): min {d['min']:.2f} m, median "
@@ -926,6 +1029,9 @@ def main(argv=None):
     ap.add_argument("--oracle-ceiling", action="store_true",
                     help="instead of running a policy, find for each seed whether any ego "
                     "speed profile of the oracle's family arrives (highway_oracle.py)")
+    ap.add_argument("--oracle-courteous", type=float, default=None, metavar="MPS2",
+                    help="the oracle counts only profiles that never make another vehicle brake "
+                         "harder than this because of the ego (ImposedBraking), e.g. 3")
     ap.add_argument("--oracle-first", action="store_true",
                     help="the oracle stops at a seed's first arriving profile (reachability "
                     "only: the per-profile counts then cover the profiles tried)")
@@ -968,7 +1074,8 @@ def main(argv=None):
             print(f"seed {seed:3d}: {outcome:16s} {e['sim_time_s']:5.1f} s simulated, "
                   f"mean speed {e['mean_speed']:4.1f} m/s, route {e['final_progress_m']:5.1f} m, "
                   f"standing {e['standing_s']:4.1f} s, others' braking "
-                  f"{e['others_max_decel_mps2']:4.1f} m/s², minimum-risk {e['minimum_risk']}",
+                  f"{e['others_max_decel_mps2']:4.1f} m/s² (imposed "
+                  f"{e['imposed_decel_mps2']:3.1f}), minimum-risk {e['minimum_risk']}",
                   flush=True)
     finally:
         if policy is not None:

@@ -110,6 +110,15 @@ FAMILIES = {
         "cruise_mps": [4.5, 7.0, 9.0, 10.0],
         "const_mps": [2.0, 3.0, 4.5, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0],
     },
+    # The default family within the lanes' 10 m/s speed limit (the speed Concord keeps to
+    # there: desired_speed_mps in deploy/highway-env.toml).
+    "limit": {
+        "waits_s": [round(0.4 * k, 1) for k in range(21)],
+        "holds": ["stop", "line", "crawl"],
+        "accels_mps2": [1.5, 3.0, 6.0],
+        "cruise_mps": [4.5, 7.0, 9.0, 10.0],
+        "const_mps": [2.0, 3.0, 4.5, 6.0, 7.0, 8.0, 9.0, 10.0],
+    },
     "small": {  # for tests: 5 profiles
         "waits_s": [0.0, 2.4],
         "holds": ["line"],
@@ -445,11 +454,14 @@ class OutOfBudget(Exception):
     """The seed's step budget (``--oracle-budget``) ran out before the search ended."""
 
 
-def explore(env, node, depth, period, outcome, counters, priority, first=False):
+def explore(env, node, depth, period, outcome, counters, priority, first=False, courteous=None):
     """Depth first from ``node`` with the unwrapped environment ``env`` in its state (consumed),
     children in the order of ``priority`` (the best profile below them first). Fills
     ``outcome[profile] = (kind, time)``; with ``first``, stops at the first arrival and returns
-    True."""
+    True. With ``courteous`` (m/s²), a step in which the ego imposes harder braking on another
+    vehicle (``highway_bridge.ImposedBraking``) ends every profile below it as ``forces``; the
+    first step does not count (what the traffic does then answers where the environment placed
+    the ego, e.g. close in front of a follower, not anything the ego did)."""
     items = sorted(node.children.values(), key=lambda ac: min(priority[i] for i in ac[1].below))
     for n, (action, child) in enumerate(items):
         e = env if n == len(items) - 1 else copy.deepcopy(env)
@@ -457,12 +469,22 @@ def explore(env, node, depth, period, outcome, counters, priority, first=False):
             counters["copies"] += 1
         if counters["steps"] >= counters["budget"]:
             raise OutOfBudget()
-        fast_step(e, action)
+        if courteous is None:
+            fast_step(e, action)
+        else:
+            imposed = hb.ImposedBraking()
+            imposed.t = depth * period
+            with imposed.attached(e):
+                fast_step(e, action)
         counters["steps"] += 1
         t = (depth + 1) * period
         if e.vehicle.crashed:
             for idx in child.below:
                 outcome[idx] = ("crash", t)
+            continue
+        if courteous is not None and imposed.max_decel > courteous:
+            for idx in child.below:
+                outcome[idx] = ("forces", t)
             continue
         if ego_state(e.vehicle) != child.state or e.has_arrived(e.vehicle) != bool(child.ends):
             raise AssertionError(f"the ego left its traffic-free course at {t:.1f} s: "
@@ -472,12 +494,12 @@ def explore(env, node, depth, period, outcome, counters, priority, first=False):
         if first and child.ends:
             return True
         if child.children and explore(e, child, depth + 1, period, outcome, counters, priority,
-                                      first):
+                                      first, courteous):
             return True
     return False
 
 
-def oracle_seed(env, seed, profiles, period, first=False, budget=None):
+def oracle_seed(env, seed, profiles, period, first=False, budget=None, courteous=None):
     """Every profile on ``seed``: whether the seed is reachable, each profile's outcome
     (``arrived``, ``crash`` with its time, ``too_slow``: does not arrive within the duration
     even on an empty road; with ``first``, the search stops at the first arrival and the
@@ -493,7 +515,8 @@ def oracle_seed(env, seed, profiles, period, first=False, budget=None):
     exhausted = False
     if root.below:
         try:
-            explore(copy.deepcopy(u0), root, 0, period, outcome, counters, priority, first)
+            explore(copy.deepcopy(u0), root, 0, period, outcome, counters, priority, first,
+                    courteous)
         except OutOfBudget:
             exhausted = True
     arrived = [i for i, o in enumerate(outcome) if o[0] == "arrived"]
@@ -506,7 +529,7 @@ def oracle_seed(env, seed, profiles, period, first=False, budget=None):
         "arrived_profiles": [profiles[i]["name"] for i in arrived],
         "earliest_arrival_s": min((outcome[i][1] for i in arrived), default=None),
         "counts": {k: sum(o[0] == k for o in outcome)
-                   for k in ("arrived", "crash", "too_slow", "untried")},
+                   for k in ("arrived", "crash", "forces", "too_slow", "untried")},
         "outcomes": [list(o) for o in outcome],
         "simulated_steps": counters["steps"],
         "copies": counters["copies"],
@@ -532,7 +555,7 @@ def reusable(path, env_name, duration_s, policy_frequency, family):
 
 
 def run_oracle(env_name, spec, seeds, family, policy_frequency=5, progress=None, first=False,
-               budget=None, reuse=None, checkpoint=None):
+               budget=None, reuse=None, checkpoint=None, courteous=None):
     """The oracle over ``seeds``; the JSON document ``--oracle-ceiling --json`` writes.
     ``reuse``: the result of ``reusable``, whose seeds are taken as they are; ``checkpoint``
     is called with the document so far after every seed."""
@@ -554,12 +577,12 @@ def run_oracle(env_name, spec, seeds, family, policy_frequency=5, progress=None,
                     r["outcomes"] = [o if o[0] != "too_slow" else ["untried", None]
                                      for o in r["outcomes"]]
                     r["counts"] = {k: sum(o[0] == k for o in r["outcomes"])
-                                   for k in ("arrived", "crash", "too_slow", "untried")}
+                                   for k in ("arrived", "crash", "forces", "too_slow", "untried")}
                     r["reused_from_duration_s"] = known_duration
                     r["simulated_steps"] = r["copies"] = 0
                     r["cpu_s"] = 0.0
                 else:
-                    r = oracle_seed(env, seed, profiles, period, first, budget)
+                    r = oracle_seed(env, seed, profiles, period, first, budget, courteous)
                 r["wall_s"] = time.monotonic() - t0
                 rows.append(r)
                 if progress:
@@ -568,21 +591,24 @@ def run_oracle(env_name, spec, seeds, family, policy_frequency=5, progress=None,
                     progress(f"oracle {env_name} seed {seed:3d}: "
                              f"{'reachable' if r['reachable'] else 'UNDECIDED' if r['undecided'] else 'UNREACHABLE':11s} "
                              f"{r['counts']['arrived']:3d} of {len(profiles)} profiles arrive "
-                             f"({r['counts']['crash']} crash, {r['counts']['too_slow']} too "
+                             f"({r['counts']['crash']} crash, "
+                             f"{r['counts'].get('forces', 0)} forcing, {r['counts']['too_slow']} too "
                              f"slow, {r['counts']['untried']} untried), "
                              f"{r['simulated_steps']} steps, {r['wall_s']:5.1f} s; "
                              f"{per_seed:5.1f} s per seed, about "
                              f"{per_seed * (len(seeds) - n - 1) / 60:5.1f} min left")
                 if checkpoint:
                     checkpoint(document(env_name, spec, family, profiles, policy_frequency,
-                                        first, budget, rows, time.monotonic() - started))
+                                        first, budget, rows, time.monotonic() - started,
+                                        courteous))
     finally:
         env.close()
     return document(env_name, spec, family, profiles, policy_frequency, first, budget, rows,
-                    time.monotonic() - started)
+                    time.monotonic() - started, courteous)
 
 
-def document(env_name, spec, family, profiles, policy_frequency, first, budget, rows, wall_s):
+def document(env_name, spec, family, profiles, policy_frequency, first, budget, rows, wall_s,
+             courteous=None):
     per_profile = [0] * len(profiles)
     for r in rows:
         for i, o in enumerate(r["outcomes"]):
@@ -592,6 +618,7 @@ def document(env_name, spec, family, profiles, policy_frequency, first, budget, 
         "oracle": {"env": env_name, "duration_s": spec["duration_s"],
                    "policy_frequency_hz": policy_frequency, "family": family,
                    "first_arrival_only": first, "step_budget": budget,
+                   "max_imposed_decel_mps2": courteous,
                    "profiles": [p["name"] for p in profiles],
                    "hold_brake_mps2": HOLD_BRAKE, "crawl_speed_mps": CRAWL_SPEED,
                    "pursuit": [PURSUIT_MIN_M, PURSUIT_TIME_S]},
@@ -660,7 +687,8 @@ def main_oracle(args, spec, seeds):
 
     doc = run_oracle(args.env, spec, seeds, family, args.policy_frequency,
                      progress=lambda line: print(line, flush=True), first=args.oracle_first,
-                     budget=args.oracle_budget, reuse=reuse, checkpoint=write)
+                     budget=args.oracle_budget, reuse=reuse, checkpoint=write,
+                     courteous=args.oracle_courteous)
     write(doc)
     for line in report_lines(doc):
         print(line)

@@ -387,6 +387,62 @@ class EpisodeFields(unittest.TestCase):
                                           "timed_out": True}), "decision_timeout")
 
 
+class Imposed(unittest.TestCase):
+    """The braking the ego imposes: a follower braking for the ego counts, a car braking for
+    another car does not, and the episode's first step does not."""
+
+    def braking(self, behind_ego):
+        """One step with the ego standing 60 m into its approach and an IDM car 20 m behind
+        it at 10 m/s (``behind_ego``), or behind a standing IDM car on another approach:
+        the imposed braking and the follower's own, m/s²."""
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+        from highway_env.vehicle.behavior import IDMVehicle
+
+        env = hb.make_env("intersection-v0", "concord", 5, hb.ENVS["intersection-v0"])
+        try:
+            env.reset(seed=0)
+            u = env.unwrapped
+            road, ego = u.road, u.vehicle
+            lane = road.network.get_lane(("o0", "ir0", 0))
+            ego.position = lane.position(60.0, 0.0)
+            ego.heading = lane.heading_at(60.0)
+            ego.speed = 0.0
+            approach = ("o0", "ir0", 0) if behind_ego else ("o2", "ir2", 0)
+            follower = IDMVehicle.make_on_lane(road, approach, 40.0, speed=10.0)
+            follower.plan_route_to("o1")
+            road.vehicles = [ego, follower]
+            if not behind_ego:
+                leader = IDMVehicle.make_on_lane(road, approach, 60.0, speed=0.0)
+                leader.plan_route_to("o1")
+                road.vehicles.append(leader)
+            imposed = hb.ImposedBraking()
+            imposed.t = 0.2
+            with imposed.attached(u):
+                # The regulation's turn now: the follower yields (to the ego or its leader).
+                road.enforce_road_rules()
+                self.assertTrue(follower.is_yielding)
+                self.assertEqual(follower.yields_to_ego, behind_ego)
+                env.step(np.array([0.0, 0.0], dtype=np.float32))
+            first = hb.ImposedBraking()  # t = 0: the episode's first step
+            with first.attached(u):
+                env.step(np.array([0.0, 0.0], dtype=np.float32))
+            self.assertEqual(first.max_decel, 0.0)
+            return imposed.max_decel, (10.0 - follower.speed) / 0.4
+        finally:
+            env.close()
+
+    def test_a_follower_braking_for_the_ego_counts(self):
+        imposed, braked = self.braking(behind_ego=True)
+        self.assertGreater(braked, 3.0)
+        self.assertGreater(imposed, 3.0)
+
+    def test_braking_for_another_car_does_not(self):
+        imposed, braked = self.braking(behind_ego=False)
+        self.assertGreater(braked, 3.0)
+        self.assertEqual(imposed, 0.0)
+
+
 def _states(u):
     sys.path.insert(0, HERE)
     import highway_oracle as ho
