@@ -848,7 +848,10 @@ impl Planner {
             // The agent's box at every step, and for the post-encroachment margins when it is
             // in its passage of the conflict zone (before now: at its current speed).
             let f = &forecasts[j];
-            let window = |secs: f64| (libm::ceil(secs / self.dt) as usize).min(MAX_SWEEP_STEPS);
+            // One step more than the margin: candidates are checked at the steps, and one may
+            // enter its passage between two of them.
+            let window =
+                |secs: f64| (libm::ceil(secs / self.dt) as usize + 1).min(MAX_SWEEP_STEPS);
             let (behind, ahead) = (window(f.pet_s[0]), window(f.pet_s[1]));
             let total = behind + self.steps + ahead;
             let v = agent.speed();
@@ -931,7 +934,7 @@ impl Planner {
             // Margins: the PET is measured on the passages, so from `ahead` before the agent
             // enters its passage until `behind` after it has left it, the ego keeps its centre
             // out of all of its own passage, at any lateral offset.
-            let Some((enters, leaves)) = in_passage.filter(|_| behind + ahead > 0) else {
+            let Some((enters, leaves)) = in_passage.filter(|_| f.pet_s != [0.0; 2]) else {
                 continue;
             };
             let (s_lo, s_hi) = (s0 + f.ego_pass_m[0], s0 + f.ego_pass_m[1]);
