@@ -850,8 +850,7 @@ impl Planner {
             let f = &forecasts[j];
             // One step more than the margin: candidates are checked at the steps, and one may
             // enter its passage between two of them.
-            let window =
-                |secs: f64| (libm::ceil(secs / self.dt) as usize + 1).min(MAX_SWEEP_STEPS);
+            let window = |secs: f64| (libm::ceil(secs / self.dt) as usize + 1).min(MAX_SWEEP_STEPS);
             let (behind, ahead) = (window(f.pet_s[0]), window(f.pet_s[1]));
             let total = behind + self.steps + ahead;
             let v = agent.speed();

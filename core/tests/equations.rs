@@ -1126,24 +1126,30 @@ fn through_the_turn_the_plan_keeps_the_lateral_acceleration_limit() {
 /// `a` m/s².
 fn planner_with(agents: &[AgentState], s: f64, v: f64, a: f64) -> (Planner, Morphology) {
     let morph = Morphology::built_in(BuiltIn::PaperIntersection);
-    let mut planner = Planner::default();
     let start = FrenetState {
         s,
         ds: v,
         dds: a,
         ..FrenetState::default()
     };
+    (prepared(&morph, paper::CAV_LEFT, start, agents), morph)
+}
+
+/// A planner on lane `lane` of `morph` from `start` with `agents` (no process states or
+/// forecasts: each is predicted straight on at its speed).
+fn prepared(morph: &Morphology, lane: u8, start: FrenetState, agents: &[AgentState]) -> Planner {
+    let mut planner = Planner::default();
     planner.prepare(
-        paper::CAV_LEFT,
+        lane,
         start,
         100.0,
         agents,
         &[ProcessState::default(); MAX_AGENTS],
         &[Forecast::default(); MAX_AGENTS],
-        &morph,
+        morph,
         &Params::default().trajectory,
     );
-    (planner, morph)
+    planner
 }
 
 /// [`planner_with`] no other road user, unaccelerated.
@@ -1187,22 +1193,11 @@ fn a_footprint_overlapping_another_is_kept_and_a_point_in_it_is_a_contact() {
 fn standing_at_the_turn(agents: &[AgentState]) -> Planner {
     use concord_core::scene::highway_env_intersection::{APPROACH_M, EGO_LEFT};
     let morph = Morphology::built_in(BuiltIn::HighwayEnvIntersection);
-    let mut planner = Planner::default();
     let start = FrenetState {
         s: APPROACH_M,
         ..FrenetState::default()
     };
-    planner.prepare(
-        EGO_LEFT,
-        start,
-        50.0,
-        agents,
-        &[ProcessState::default(); MAX_AGENTS],
-        &[Forecast::default(); MAX_AGENTS],
-        &morph,
-        &Params::default().trajectory,
-    );
-    planner
+    prepared(&morph, EGO_LEFT, start, agents)
 }
 
 #[test]
