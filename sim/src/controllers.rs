@@ -353,9 +353,10 @@ pub enum Advisor {
     Oracle,
 }
 
-/// The eHMI message of a decision: the core's own announcement ("please go ahead" while it
-/// gives way, "I am going first" otherwise, and while a deadlock negotiation has announced
-/// it). Every Concord controller speaks through this one function.
+/// The eHMI message of a decision: the core's own announcement (`Decision::announce`: "I am
+/// going first" when its plan enters a driver's passage before the driver has left it, or
+/// while a deadlock negotiation has announced it; "please go ahead" otherwise). Every Concord
+/// controller speaks through this one function.
 fn ehmi_of(d: &Decision) -> Option<Signal> {
     Some(Signal::announcing(d.announce == Announcement::GivingWay))
 }
