@@ -1042,7 +1042,8 @@ def main(argv=None):
                     help="an oracle JSON of the same env at a shorter or equal duration: its "
                     "reachable seeds are reachable here too and are not searched again")
     ap.add_argument("--family", default="default",
-                    help="the oracle's profile family: default, small, or a JSON file "
+                    help="the oracle's profile family: default, limit (within the lanes' speed "
+                    "limit), small, or a JSON file "
                     "(see highway_oracle.py)")
     ap.add_argument("--verbose", action="store_true")
     args = ap.parse_args(argv)

@@ -11,7 +11,7 @@ use concord_core::scene::{
     paper, AgentState, BuiltIn, Morphology, ProcessState, Turn, Vec2, MAX_AGENTS,
 };
 use concord_core::trajectory::{
-    Forecast, FrenetState, Hit, Planner, Quartic, Quintic, Reject, Trajectory,
+    travel, Forecast, FrenetState, Hit, Planner, Quartic, Quintic, Reject, Trajectory,
 };
 use concord_core::DecisionCore;
 
@@ -1382,4 +1382,19 @@ fn the_minimum_risk_fallback_brakes_evenly_until_it_stands() {
         assert!((pt.speed - (8.0 - p.emergency_brake_mps2 * pt.t).max(0.0)).abs() < EPS);
     }
     assert!(out.points().last().unwrap().t > t_stop);
+}
+
+/// Forecast distances (m): accelerating from 0 at 1 m/s² to a 2 m/s top speed covers 2 m in
+/// the first 2 s and 2 m/s after, 18 m in 10 s; braking evenly to stop in 10 m from 10 m/s
+/// (5 m/s²) covers the 10 m and no more.
+#[test]
+fn forecast_travel_saturates_at_the_top_speed_and_stops_at_its_stop_distance() {
+    assert!((travel(0.0, 1.0, 10.0, 2.0) - 18.0).abs() < EPS);
+    assert!((travel(10.0, -5.0, 1.0, 20.0) - 7.5).abs() < EPS);
+    let stopping = Forecast {
+        stop_in_m: 10.0,
+        ..Forecast::default()
+    };
+    assert!((stopping.travel(10.0, 1.0, 20.0) - 7.5).abs() < EPS);
+    assert!((stopping.travel(10.0, 5.0, 20.0) - 10.0).abs() < EPS);
 }
