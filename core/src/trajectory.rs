@@ -1471,3 +1471,25 @@ pub enum Reject {
     /// Ends the horizon standing inside a conflict zone.
     StandsInZone,
 }
+
+#[cfg(test)]
+mod tests {
+    use super::{Hit, Occupancy};
+
+    #[test]
+    fn a_box_inside_another_is_absorbed_and_one_sticking_out_is_kept() {
+        // A 10 × 4 m footprint box, then one with the same extent along the lane and 1 m
+        // further to either side: not inside it, so it is kept and its own part is a contact;
+        // one within it on every side is absorbed.
+        for (l_lo, l_hi) in [(-1.0, 3.0), (-3.0, 1.0)] {
+            let mut occ = Occupancy::default();
+            occ.add(0, 0.0, 10.0, -2.0, 2.0, false, None);
+            occ.add(0, 0.0, 10.0, l_lo, l_hi, false, None);
+            assert_eq!(occ.boxes(0).count(), 2, "{l_lo}..{l_hi}");
+            let outside_the_first = if l_hi > 2.0 { 2.5 } else { -2.5 };
+            assert_eq!(occ.hit(0, 5.0, outside_the_first), Hit::Contact);
+            occ.add(0, 1.0, 9.0, -1.0, 1.0, false, None);
+            assert_eq!(occ.boxes(0).count(), 2, "{l_lo}..{l_hi}");
+        }
+    }
+}

@@ -1398,3 +1398,72 @@ fn forecast_travel_saturates_at_the_top_speed_and_stops_at_its_stop_distance() {
     assert!((stopping.travel(10.0, 1.0, 20.0) - 7.5).abs() < EPS);
     assert!((stopping.travel(10.0, 5.0, 20.0) - 10.0).abs() < EPS);
 }
+
+/// The fallback's drive-on search keeps the candidate whose first contact comes latest: over
+/// more samples that time never falls, and in some scene it rises past the first sample's.
+#[test]
+fn the_drive_on_search_keeps_the_latest_contact() {
+    let p = Params::default();
+    let n = p.trajectory.later_samples();
+    let mut rose = 0;
+    for cav_before in [0.0, 2.0, 4.0, 6.0] {
+        for hdv_before in (2..30).map(|d| d as f64) {
+            let mut core = paper_core(p);
+            let scene = crossing_scene(core.morphology(), cav_before, 6.0, hdv_before);
+            let d = core.step(&scene, 0.0, None).unwrap();
+            if d.source != concord_core::DecisionSource::MinimumRisk {
+                continue;
+            }
+            let mut probe = *core.planner();
+            let prof = core.choice().profiles[Maneuver::KeepSpeed.index()];
+            probe.sample(&prof, n, d.cycle, &p.trajectory);
+            let latest: Vec<f64> = [1, n / 4, n / 2, n]
+                .iter()
+                .filter_map(|&k| probe.latest_contact(k, &p.trajectory).map(|(_, t)| t))
+                .collect();
+            assert!(
+                latest.windows(2).all(|w| w[1] >= w[0]),
+                "CAV {cav_before} m, HDV {hdv_before} m: {latest:?}"
+            );
+            if latest.len() == 4 && latest[3] > latest[0] {
+                rose += 1;
+            }
+        }
+    }
+    assert!(
+        rose > 0,
+        "no scene where a later sample's contact came later"
+    );
+}
+
+#[test]
+fn keeping_a_speed_too_fast_for_the_turn_breaks_its_curve_cap() {
+    // 13 m/s towards the left turn with room to brake for it: holding the speed for 4 s
+    // reaches the curve above its cap and faster than braking at the limit would leave the
+    // ego, so it breaks a limit (only a speed the ego cannot shed in time is let through).
+    let p = Params::default().trajectory;
+    for s in [0.0, 10.0, 20.0] {
+        let (planner, _) = empty_road_planner(s, 13.0);
+        assert_eq!(
+            planner.evaluate(4.0, 13.0, 0.0, &p).err(),
+            Some(Reject::Limits),
+            "s {s}"
+        );
+    }
+}
+
+#[test]
+fn a_follower_in_the_egos_lane_puts_no_box_in_its_way_but_a_car_ahead_does() {
+    // A car 8 m behind the ego in its lane, as fast, is its follower's business (it keeps its
+    // own gap): no box at any step. The same car 20 m ahead blocks.
+    let morph = Morphology::built_in(BuiltIn::PaperIntersection);
+    let lane = morph.lane(paper::CAV_LEFT);
+    let car = |s: f64| {
+        let (pos, heading, _) = lane.pose_at(s, 0);
+        AgentState::moving(1, pos, heading, 8.0)
+    };
+    let (behind, _) = planner_with(&[car(2.0)], 10.0, 8.0, 0.0);
+    assert!((0..50).all(|step| behind.occupancy.boxes(step).next().is_none()));
+    let (ahead, _) = planner_with(&[car(30.0)], 10.0, 8.0, 0.0);
+    assert!(ahead.occupancy.boxes(0).next().is_some());
+}
