@@ -393,26 +393,20 @@ impl Occupancy {
         }
         let mut hit = Hit::Free;
         let mut ego = None;
-        for b in 0..self.n[step] as usize {
-            if s >= self.s_lo[step][b]
-                && s <= self.s_hi[step][b]
-                && l >= self.l_lo[step][b]
-                && l <= self.l_hi[step][b]
-            {
-                if self.margin[step][b] {
-                    hit = Hit::Margin;
-                    continue;
-                }
-                let f = match self.footprint[step][b] {
-                    Some(f) if !f.exact => f,
-                    _ => return Hit::Contact,
-                };
-                let (centre, c, s_) = *ego.get_or_insert_with(|| self.frame.pose(s, l));
-                let (hl, hw) = self.half;
-                let other = (hl + f.grown + f.clearance, hw + f.clearance);
-                if rectangles_overlap(centre, (c, s_), (hl, hw), f.centre, (f.cos, f.sin), other) {
-                    return Hit::Contact;
-                }
+        for b in self.containing(step, s, l) {
+            if self.margin[step][b] {
+                hit = Hit::Margin;
+                continue;
+            }
+            let f = match self.footprint[step][b] {
+                Some(f) if !f.exact => f,
+                _ => return Hit::Contact,
+            };
+            let (centre, c, s_) = *ego.get_or_insert_with(|| self.frame.pose(s, l));
+            let (hl, hw) = self.half;
+            let other = (hl + f.grown + f.clearance, hw + f.clearance);
+            if rectangles_overlap(centre, (c, s_), (hl, hw), f.centre, (f.cos, f.sin), other) {
+                return Hit::Contact;
             }
         }
         hit
@@ -425,14 +419,11 @@ impl Occupancy {
             return false;
         }
         let (hl, hw) = self.half;
-        (0..self.n[step] as usize).any(|b| {
+        let mut ego = None;
+        self.containing(step, s, l).any(|b| {
             !self.margin[step][b]
-                && s >= self.s_lo[step][b]
-                && s <= self.s_hi[step][b]
-                && l >= self.l_lo[step][b]
-                && l <= self.l_hi[step][b]
                 && self.footprint[step][b].is_none_or(|f| {
-                    let (centre, c, s_) = self.frame.pose(s, l);
+                    let (centre, c, s_) = *ego.get_or_insert_with(|| self.frame.pose(s, l));
                     rectangles_overlap(
                         centre,
                         (c, s_),
@@ -442,6 +433,17 @@ impl Occupancy {
                         (hl, hw),
                     )
                 })
+        })
+    }
+
+    /// Indices of the boxes of `step` that contain (s, l).
+    #[inline(always)]
+    fn containing(&self, step: usize, s: f64, l: f64) -> impl Iterator<Item = usize> + '_ {
+        (0..self.n[step] as usize).filter(move |&b| {
+            s >= self.s_lo[step][b]
+                && s <= self.s_hi[step][b]
+                && l >= self.l_lo[step][b]
+                && l <= self.l_hi[step][b]
         })
     }
 
@@ -859,19 +861,15 @@ impl Planner {
             // Predictions move at most a few segments per step: after the first global
             // projection, search only segments near the previous foot point.
             let mut near: Option<usize> = None;
+            // Its forecast at time t, s (before now: at its current speed), and the distance
+            // it has covered by then, m.
+            let forecast_at = |t: f64| if t > 0.0 { *f } else { Forecast::default() };
+            let along = |t: f64| forecast_at(t).travel(v, t, v_top);
             for i in 0..total {
                 let t = (i as f64 - behind as f64 + 1.0) * self.dt;
-                let forecast = if t > 0.0 { *f } else { Forecast::default() };
                 // In its passage at any moment of the step (a test at the step's end alone
                 // would shorten the margins by up to a step on each side).
-                let t_before = t - self.dt;
-                let before = if t_before > 0.0 {
-                    *f
-                } else {
-                    Forecast::default()
-                }
-                .travel(v, t_before, v_top);
-                if forecast.travel(v, t, v_top) >= f.pass_m[0] && before <= f.pass_m[1] {
+                if along(t) >= f.pass_m[0] && along(t - self.dt) <= f.pass_m[1] {
                     in_passage = Some(in_passage.map_or((i, i), |(a, _)| (a, i)));
                 }
                 let step = i.wrapping_sub(behind);
@@ -881,7 +879,7 @@ impl Planner {
                 let (pos, heading) = predict(
                     agent,
                     &processes[j],
-                    &forecast,
+                    &forecast_at(t),
                     morph,
                     t,
                     p.max_speed_mps,

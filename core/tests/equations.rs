@@ -1152,6 +1152,13 @@ fn prepared(morph: &Morphology, lane: u8, start: FrenetState, agents: &[AgentSta
     planner
 }
 
+/// A road user on the centre line of the paper's left-turn lane, `s` m along it, at `v` m/s.
+fn car_on_the_turn(s: f64, v: f64) -> AgentState {
+    let morph = Morphology::built_in(BuiltIn::PaperIntersection);
+    let (pos, heading, _) = morph.lane(paper::CAV_LEFT).pose_at(s, 0);
+    AgentState::moving(1, pos, heading, v)
+}
+
 /// [`planner_with`] no other road user, unaccelerated.
 fn empty_road_planner(s: f64, v: f64) -> (Planner, Morphology) {
     planner_with(&[], s, v, 0.0)
@@ -1162,12 +1169,7 @@ fn a_footprint_overlapping_another_is_kept_and_a_point_in_it_is_a_contact() {
     // Two standing cars in the ego's lane, 30 and 27 m ahead: the second's box reaches 3 m
     // further back than the first's and is not inside it, so both block; a point in either
     // is a contact (a footprint, not a margin).
-    let morph = Morphology::built_in(BuiltIn::PaperIntersection);
-    let lane = morph.lane(paper::CAV_LEFT);
-    let car = |ahead: f64| {
-        let (pos, heading, _) = lane.pose_at(ahead, 0);
-        AgentState::moving(1, pos, heading, 0.0)
-    };
+    let car = |ahead: f64| car_on_the_turn(ahead, 0.0);
     let (planner, _) = planner_with(&[car(30.0), car(27.0)], 0.0, 5.0, 0.0);
     let boxes: Vec<_> = planner.occupancy.boxes(0).collect();
     assert_eq!(boxes.len(), 2, "{boxes:?}");
@@ -1456,12 +1458,7 @@ fn keeping_a_speed_too_fast_for_the_turn_breaks_its_curve_cap() {
 fn a_follower_in_the_egos_lane_puts_no_box_in_its_way_but_a_car_ahead_does() {
     // A car 8 m behind the ego in its lane, as fast, is its follower's business (it keeps its
     // own gap): no box at any step. The same car 20 m ahead blocks.
-    let morph = Morphology::built_in(BuiltIn::PaperIntersection);
-    let lane = morph.lane(paper::CAV_LEFT);
-    let car = |s: f64| {
-        let (pos, heading, _) = lane.pose_at(s, 0);
-        AgentState::moving(1, pos, heading, 8.0)
-    };
+    let car = |s: f64| car_on_the_turn(s, 8.0);
     let (behind, _) = planner_with(&[car(2.0)], 10.0, 8.0, 0.0);
     assert!((0..50).all(|step| behind.occupancy.boxes(step).next().is_none()));
     let (ahead, _) = planner_with(&[car(30.0)], 10.0, 8.0, 0.0);

@@ -244,31 +244,58 @@ pub fn check(
     }
 }
 
+/// Plans against what their maneuver says by itself (passing behind the others, or going
+/// first while slowing a little): stance, maneuver, eHMI template, description.
+const AGAINST_ITS_MANEUVER: [(Stance, Maneuver, &str, &str); 5] = [
+    (
+        Stance::Yielding,
+        Maneuver::Accelerate,
+        "Please go ahead; I am speeding up behind you.",
+        "lets the crossing traffic go first and speeds up behind it",
+    ),
+    (
+        Stance::Yielding,
+        Maneuver::KeepSpeed,
+        "Please go ahead; I am keeping my speed behind you.",
+        "lets the crossing traffic go first and keeps its speed behind it",
+    ),
+    (
+        Stance::Yielding,
+        Maneuver::TurnLeft,
+        "Please go ahead; I am turning left after you.",
+        "lets the crossing traffic go first and turns left after it",
+    ),
+    (
+        Stance::Yielding,
+        Maneuver::TurnRight,
+        "Please go ahead; I am turning right after you.",
+        "lets the crossing traffic go first and turns right after it",
+    ),
+    (
+        Stance::Proceeding,
+        Maneuver::Decelerate,
+        "Going first, a little slower; please wait.",
+        "slows a little but passes first; others should wait",
+    ),
+];
+
+/// The (template, description) of `executed` when its plan goes against its maneuver.
+fn against_its_maneuver(executed: Executed) -> Option<(&'static str, &'static str)> {
+    let stance = executed.stance();
+    AGAINST_ITS_MANEUVER
+        .iter()
+        .find(|(s, m, _, _)| *s == stance && *m == executed.maneuver)
+        .map(|&(_, _, template, description)| (template, description))
+}
+
 /// The template for `executed` in a tone for `style` (balanced when unknown).
 pub fn template(executed: Executed, style: Option<Style>) -> &'static str {
     use Style::{Aggressive, Conservative};
     if executed.stopping {
         return "Stopping. Please go ahead carefully.";
     }
-    // A plan against what its maneuver says by itself: passing behind the others, or going
-    // first while slowing a little.
-    match (executed.stance(), executed.maneuver) {
-        (Stance::Yielding, Maneuver::Accelerate) => {
-            return "Please go ahead; I am speeding up behind you."
-        }
-        (Stance::Yielding, Maneuver::KeepSpeed) => {
-            return "Please go ahead; I am keeping my speed behind you."
-        }
-        (Stance::Yielding, Maneuver::TurnLeft) => {
-            return "Please go ahead; I am turning left after you."
-        }
-        (Stance::Yielding, Maneuver::TurnRight) => {
-            return "Please go ahead; I am turning right after you."
-        }
-        (Stance::Proceeding, Maneuver::Decelerate) => {
-            return "Going first, a little slower; please wait."
-        }
-        _ => {}
+    if let Some((template, _)) = against_its_maneuver(executed) {
+        return template;
     }
     match (executed.maneuver, style) {
         (Maneuver::Decelerate, Some(Aggressive)) => "Slowing down. Go ahead.",
@@ -304,23 +331,8 @@ pub fn describe(executed: Executed) -> &'static str {
     if executed.stopping {
         return "is stopping for safety; others may pass with care";
     }
-    match (executed.stance(), executed.maneuver) {
-        (Stance::Yielding, Maneuver::Accelerate) => {
-            return "lets the crossing traffic go first and speeds up behind it"
-        }
-        (Stance::Yielding, Maneuver::KeepSpeed) => {
-            return "lets the crossing traffic go first and keeps its speed behind it"
-        }
-        (Stance::Yielding, Maneuver::TurnLeft) => {
-            return "lets the crossing traffic go first and turns left after it"
-        }
-        (Stance::Yielding, Maneuver::TurnRight) => {
-            return "lets the crossing traffic go first and turns right after it"
-        }
-        (Stance::Proceeding, Maneuver::Decelerate) => {
-            return "slows a little but passes first; others should wait"
-        }
-        _ => {}
+    if let Some((_, description)) = against_its_maneuver(executed) {
+        return description;
     }
     match executed.maneuver {
         Maneuver::Decelerate => "is slowing down to let the crossing traffic go first",
