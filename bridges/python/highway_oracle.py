@@ -450,6 +450,12 @@ class Node:
         self.below = []  # every profile through this node
 
 
+# A profile's outcome on a seed: it arrives, crashes, imposes harder braking than allowed
+# (``forces``, with ``--oracle-courteous``), cannot arrive in time even on an empty road, or
+# was not tried (the search stopped at the first arrival).
+OUTCOMES = ("arrived", "crash", "forces", "too_slow", "untried")
+
+
 class OutOfBudget(Exception):
     """The seed's step budget (``--oracle-budget``) ran out before the search ended."""
 
@@ -529,7 +535,7 @@ def oracle_seed(env, seed, profiles, period, first=False, budget=None, courteous
         "arrived_profiles": [profiles[i]["name"] for i in arrived],
         "earliest_arrival_s": min((outcome[i][1] for i in arrived), default=None),
         "counts": {k: sum(o[0] == k for o in outcome)
-                   for k in ("arrived", "crash", "forces", "too_slow", "untried")},
+                   for k in OUTCOMES},
         "outcomes": [list(o) for o in outcome],
         "simulated_steps": counters["steps"],
         "copies": counters["copies"],
@@ -577,7 +583,7 @@ def run_oracle(env_name, spec, seeds, family, policy_frequency=5, progress=None,
                     r["outcomes"] = [o if o[0] != "too_slow" else ["untried", None]
                                      for o in r["outcomes"]]
                     r["counts"] = {k: sum(o[0] == k for o in r["outcomes"])
-                                   for k in ("arrived", "crash", "forces", "too_slow", "untried")}
+                                   for k in OUTCOMES}
                     r["reused_from_duration_s"] = known_duration
                     r["simulated_steps"] = r["copies"] = 0
                     r["cpu_s"] = 0.0
