@@ -35,6 +35,11 @@ const OVERSHOOT_PER_UT: f64 = 16.0 / 81.0;
 /// Relative error below which a footprint box counts as exact: the lane's curvature times the
 /// box's lateral reach, and |cos·sin| of the relative heading.
 const FRAME_EXACT_TOLERANCE: f64 = 0.02;
+/// Inside the junction, a drive-on candidate of the minimum-risk fallback is refused when it is
+/// predicted to collide more than this many planning steps before braking is: closer than
+/// that, the two predictions meet the same crossing car within the forecasts' resolution,
+/// and standing in its path is the worse of the two.
+const DRIVE_ON_STEPS: f64 = 3.0;
 /// Bins of the ego lane's pose table over the planning window.
 const FRAME_BINS: usize = 256;
 /// Below this speed at the end of the horizon a candidate stands, m/s.
@@ -1376,8 +1381,11 @@ impl Planner {
     /// react); when braking would end standing inside a conflict zone, one free of predicted
     /// contact is taken: the ego clears the zone. Past its stop line and before the end of the
     /// last conflict zone, inside the junction, a braking that is predicted to be hit leaves
-    /// the ego standing in the other's path: any feasible drive-on candidate is taken instead,
-    /// the one with the latest contact. Drive-on candidates are searched with
+    /// the ego standing in the other's path: a feasible drive-on candidate is taken instead,
+    /// the one with the latest contact, unless that candidate's own footprint is predicted to
+    /// collide more than [`DRIVE_ON_STEPS`] steps before the braking's (it would run into a
+    /// car ahead, a leader standing in the exit, say, which braking avoids). Drive-on
+    /// candidates are searched with
     /// `fallback_samples`. Returns the index of the profile taken (`None`: braking).
     pub fn fallback(
         &mut self,
@@ -1399,12 +1407,20 @@ impl Planner {
                 .iter()
                 .any(|z| self.start.s < z[1]);
         let clear_out = contact.is_some() && in_junction;
-        let mut latest = contact.unwrap_or(f64::INFINITY);
+        let braking_hit = contact.unwrap_or(f64::INFINITY);
+        let mut latest = braking_hit;
         let mut taken = None;
+        let mut candidate = Trajectory::default();
         for (k, profile) in drive_on.iter().enumerate() {
             self.sample(profile, p.later_samples(), cycle, p);
             if let Some((c, t)) = self.latest_contact(p.later_samples(), p) {
-                let clears = clear_out || (stands_in_zone && t.is_infinite());
+                let clears = if clear_out {
+                    self.render(&c, lane, &mut candidate);
+                    self.first_collision(&candidate)
+                        .is_none_or(|hit| hit + DRIVE_ON_STEPS * self.dt >= braking_hit)
+                } else {
+                    stands_in_zone && t.is_infinite()
+                };
                 if t > latest || (clears && taken.is_none()) {
                     latest = t;
                     taken = Some(k);
@@ -1472,7 +1488,133 @@ pub enum Reject {
 
 #[cfg(test)]
 mod tests {
-    use super::{Hit, Occupancy};
+    use super::{Footprint, FrenetState, Hit, Occupancy, Planner, VCAP_BINS};
+    use crate::choice::Profile;
+    use crate::params::Params;
+    use crate::scene::{Lane, Turn, Vec2};
+
+    #[test]
+    fn sample_zero_is_the_nominal_itself_and_its_offset_is_held_only_below_the_threshold() {
+        // eq. 23: sample 0 carries no noise, also for a yielding profile (whose odd samples
+        // roll on at a random speed). Its offset is held at the start's only when an end is
+        // below the low-speed threshold, not at it.
+        let p = Params::default().trajectory;
+        let mut planner = Planner {
+            start: FrenetState {
+                s: 0.0,
+                ds: 8.0,
+                dds: 0.0,
+                l: 0.3,
+                dl: 0.0,
+                ddl: 0.0,
+            },
+            ..Planner::default()
+        };
+        let stop = Profile {
+            accel: -2.0,
+            target_speed: 0.0,
+            duration: 4.0,
+            stop_m: 16.0,
+        };
+        planner.sample(&stop, 8, 7, &p);
+        assert_eq!((planner.end_t[0], planner.end_v[0]), (4.0, 0.0));
+        assert_eq!(planner.end_l[0], 0.3, "stopping: the offset is held");
+        assert!(planner.end_v[1] > 0.0, "an odd sample of a stop rolls on");
+        // Rolling on at v_T, an odd sample covers the stop's distance d = v₀T/2 in
+        // T' = 2d / (v₀ + v_T): between T/2 and T before its own perturbation.
+        let short = Profile {
+            duration: 3.0,
+            ..stop
+        };
+        planner.sample(&short, 64, 7, &p);
+        let spread = p.sigma_rel * p.sigma_clip;
+        for k in (1..64).step_by(2) {
+            let t = planner.end_t[k];
+            assert!(
+                t <= 3.0 * (1.0 + spread) + 1e-9
+                    && t >= (1.5 * (1.0 - spread)).max(p.min_duration_s),
+                "sample {k}: T {t}"
+            );
+        }
+        let slow = Profile {
+            accel: -1.0,
+            target_speed: p.low_speed_mps,
+            duration: 3.0,
+            stop_m: f64::INFINITY,
+        };
+        planner.sample(&slow, 8, 7, &p);
+        assert_eq!((planner.end_t[0], planner.end_v[0]), (3.0, p.low_speed_mps));
+        assert_eq!(
+            planner.end_l[0], 0.0,
+            "at the threshold the offset is sampled (z = 0)"
+        );
+    }
+
+    #[test]
+    fn a_margin_inside_a_footprint_box_leaves_its_rectangle_exact() {
+        // A car's 10 × 8 m box with its 4.8 × 2 m rectangle at (5, 0), then a margin within
+        // the box: the ego 3.5 m to the side of the car is inside the box but clear of the
+        // rectangle, so it meets nothing (the box would block all of itself without it).
+        let mut occ = Occupancy::default();
+        for (k, x) in occ.frame.x.iter_mut().enumerate() {
+            *x = k as f64;
+        }
+        let car = Footprint {
+            centre: Vec2::new(5.0, 0.0),
+            cos: 1.0,
+            sin: 0.0,
+            clearance: 0.0,
+            grown: 0.0,
+            exact: false,
+        };
+        occ.add(0, 0.0, 10.0, -4.0, 4.0, false, Some(car));
+        assert_eq!(occ.hit(0, 5.0, 3.5), Hit::Free);
+        assert_eq!(occ.hit(0, 5.0, 1.5), Hit::Contact);
+        occ.add(0, 1.0, 9.0, -1.0, 1.0, true, None);
+        occ.add(0, 0.0, 10.0, -4.0, 4.0, false, Some(car));
+        assert_eq!(occ.boxes(0).count(), 1);
+        assert_eq!(occ.hit(0, 5.0, 3.5), Hit::Free);
+    }
+
+    #[test]
+    fn each_curve_cap_holds_for_the_sharpest_vertex_of_its_bin() {
+        // A straight run into a 5 m radius arc sampled every 0.1 m, finer than the caps'
+        // 0.3 m bins: the bin where the arc begins is capped by the arc's first vertices, not
+        // by the straight segment its start lies on.
+        let p = Params::default().trajectory;
+        let lane = Lane::builder(Vec2::new(-30.0, 0.0))
+            .line_to(Vec2::new(0.0, 0.0))
+            .arc(Vec2::new(0.0, 5.0), 1.0, 0.1)
+            .line_to(Vec2::new(20.0, 30.0))
+            .build(1.75, 0.0, Turn::Left)
+            .expect("a lane");
+        let mut planner = Planner::default();
+        let (s0, reach) = (20.0, 81.0);
+        planner.fill_vcap(&lane, s0, reach, &p);
+        let bin = reach / VCAP_BINS as f64;
+        let cap = |kappa: f64| {
+            if kappa > p.max_curvature {
+                0.0
+            } else {
+                libm::sqrt(p.max_lateral_accel_mps2 / kappa.max(1e-12)).min(p.max_speed_mps)
+            }
+        };
+        let mut checked = 0;
+        for k in 0..lane.segments() {
+            let s = lane.s_at_vertex(k);
+            if s <= s0 || s >= s0 + reach {
+                continue;
+            }
+            let b = ((s - s0) / bin) as usize;
+            assert!(
+                planner.vcap[b] <= cap(lane.curvature_at(s, k)) + 1e-9,
+                "vertex {k} at {s:.2} m: bin {b} capped at {}",
+                planner.vcap[b]
+            );
+            checked += 1;
+        }
+        assert!(checked > 40, "{checked} vertices");
+    }
 
     #[test]
     fn a_box_inside_another_is_absorbed_and_one_sticking_out_is_kept() {

@@ -5,7 +5,7 @@ use common::*;
 use concord_core::advice::{gate, Advice, AdviceVerdict, GateContext, RequestLog};
 use concord_core::choice::{argmax, correct, cosine, idm_accel, ChoiceHistory, Maneuver, Profile};
 use concord_core::opm::{delta_ttc, guarded_ttc};
-use concord_core::params::{AdviceParams, ChoiceParams, OpmParams, Params};
+use concord_core::params::{AdviceParams, ChoiceParams, OpmParams, Params, TrajectoryParams};
 use concord_core::saliency::{attend, softmax, Saliency, FEATURES};
 use concord_core::scene::{
     paper, AgentState, BuiltIn, Morphology, ProcessState, Turn, Vec2, MAX_AGENTS,
@@ -682,6 +682,56 @@ fn inside_the_junction_the_fallback_drives_on_rather_than_brake_into_contact() {
 }
 
 #[test]
+fn inside_the_junction_the_fallback_does_not_drive_on_into_a_car_standing_ahead() {
+    // As above, with a car standing in the CAV's lane 10 m ahead of it (5 m between bumpers):
+    // where driving on would run into it more than three planning steps before the HDV would
+    // hit the braking CAV, the fallback brakes.
+    let p = Params::default();
+    let t = p.trajectory;
+    let mut refused = 0;
+    for cav_before in [0.0, 2.0, 4.0, 6.0] {
+        for hdv_before in (2..30).map(|d| d as f64) {
+            let mut core = paper_core(p);
+            let mut scene = crossing_scene(core.morphology(), cav_before, 6.0, hdv_before);
+            let lane = *core.morphology().lane(paper::CAV_LEFT);
+            let s_cav = lane.project(scene.ego.pos).s;
+            let (pos, h, _) = lane.pose_at(s_cav + 10.0, 0);
+            scene.push(AgentState::moving(2, pos, h, 0.0));
+            let d = core.step(&scene, 0.0, None).unwrap();
+            if d.source != concord_core::DecisionSource::MinimumRisk {
+                continue;
+            }
+            let planner = *core.planner();
+            let mut braking = concord_core::Trajectory::default();
+            // Where the core's fallback brakes to: before the zone, or where it stops behind
+            // its leader should the leader brake at the emergency rate.
+            let room =
+                planner
+                    .yield_distance
+                    .min(core.triplet().leader.map_or(f64::INFINITY, |l| {
+                        l.gap_m - t.vehicle_length_m - t.stop_margin_m
+                            + l.speed_mps * l.speed_mps / (2.0 * t.emergency_brake_mps2)
+                    }));
+            planner.minimum_risk(room, &lane, &t, &mut braking);
+            let Some(t_brake) = planner.first_collision(&braking) else {
+                continue;
+            };
+            let taken = planner.first_collision(&d.trajectory);
+            assert!(
+                taken.is_none_or(|hit| hit + 3.0 * t.dt_s >= t_brake),
+                "CAV {cav_before} m, HDV {hdv_before} m: {:?} collides at {taken:?} s, braking at {t_brake} s",
+                d.maneuver
+            );
+            refused += usize::from(d.maneuver == Maneuver::Decelerate);
+        }
+    }
+    assert!(
+        refused > 0,
+        "no scene where braking was hit and driving on refused"
+    );
+}
+
+#[test]
 fn stale_scene_fallback_brakes_from_where_the_last_plan_puts_the_ego() {
     let mut core = paper_core(Params::default());
     assert!(
@@ -756,6 +806,72 @@ fn table2_the_jerk_limit_rejects_a_candidate_only_it_forbids() {
         Err(concord_core::trajectory::Reject::Limits)
     );
     assert!(planner.evaluate(1.5, 11.8, 0.0, &p).is_ok());
+}
+
+#[test]
+fn table2_a_start_at_the_acceleration_limit_is_within_it() {
+    // Every candidate starts with the ego's own acceleration. From exactly the 3 m/s² limit,
+    // easing off to 13 m/s in 2 s (acceleration falling linearly to 0) is feasible; so is the
+    // same from 0.1 m/s² above it (the limit follows the start); rising above the start is not.
+    let p = Params::default().trajectory;
+    let mut planner = *lone_ego(10.0).planner();
+    planner.start.dds = p.max_accel_mps2;
+    assert!(planner.evaluate(2.0, 13.0, 0.0, &p).is_ok());
+    planner.start.dds = p.max_accel_mps2 + 0.1;
+    assert!(planner.evaluate(2.0, 13.0, 0.0, &p).is_ok());
+    assert_eq!(
+        planner.evaluate(2.0, 17.0, 0.0, &p),
+        Err(concord_core::trajectory::Reject::Limits)
+    );
+}
+
+#[test]
+fn table2_the_lateral_jerk_limit_holds_between_the_ends() {
+    // A lateral quintic from a moving start can peak in jerk between its ends (l⃛ is a
+    // quadratic, eq. 18): candidates whose only excess is such an interior peak are rejected,
+    // and they are feasible once the jerk limit is lifted. (With the default 4 m/s² lateral
+    // acceleration limit that limit binds first; it is raised to 20 here.)
+    let p = TrajectoryParams {
+        max_lateral_accel_mps2: 20.0,
+        ..Params::default().trajectory
+    };
+    let lifted = TrajectoryParams {
+        max_jerk_mps3: 1e3,
+        ..p
+    };
+    let mut lone = *lone_ego(10.0).planner();
+    lone.start.l = 0.5;
+    let j_max = p.max_jerk_mps3;
+    let mut interior = 0;
+    for dl in (-4..=4).map(f64::from) {
+        for ddl in (-4..=4).map(|a| 2.0 * f64::from(a)) {
+            for l_end in [-0.9, -0.7, -0.5, 0.0, 0.5, 0.9] {
+                for t_end in [1.0, 1.5] {
+                    let q = Quintic::fit(0.5, dl, ddl, l_end, 0.0, 0.0, t_end);
+                    let ends = q.jerk(0.0).abs().max(q.jerk(t_end).abs());
+                    let peak = (0..=1000)
+                        .map(|i| q.jerk(t_end * f64::from(i) / 1000.0).abs())
+                        .fold(0.0, f64::max);
+                    let mut planner = lone;
+                    planner.start.dl = dl;
+                    planner.start.ddl = ddl;
+                    if ends > 0.9 * j_max
+                        || peak < 1.1 * j_max
+                        || planner.evaluate(t_end, 10.0, l_end, &lifted).is_err()
+                    {
+                        continue;
+                    }
+                    assert_eq!(
+                        planner.evaluate(t_end, 10.0, l_end, &p),
+                        Err(concord_core::trajectory::Reject::Limits),
+                        "l̇ {dl}, l̈ {ddl}, l_T {l_end}, T {t_end}: jerk {ends:.1} at the ends, {peak:.1} inside"
+                    );
+                    interior += 1;
+                }
+            }
+        }
+    }
+    assert!(interior > 0, "no candidate whose jerk peaks only inside");
 }
 
 #[test]
