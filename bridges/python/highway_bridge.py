@@ -704,11 +704,14 @@ class OthersMonitor:
 
 
 class ImposedBraking:
-    """The braking the ego imposes on other vehicles: each frame, a vehicle's braking counts
-    when the ego is the reason for it, by highway-env's own rules, and its acceleration with
-    the ego is below the one without (the simulator's analogue of the braking the core's
-    courtesy rule bounds; braking for other vehicles, which highway-env's regulation makes
-    hard and frequent, is left out):
+    """The braking the ego imposes on other vehicles: each frame, for a vehicle that the ego
+    holds up by highway-env's own rules, the braking it does with the ego beyond what it would
+    do without (the simulator's analogue of the braking the core's courtesy rule bounds;
+    braking for other vehicles, which highway-env's regulation makes hard and frequent, is
+    left out). A vehicle braking at 5.6 m/s² for its own leader that the ego makes brake at
+    6 m/s² counts 0.4; one that would keep its speed and brakes at 4 m/s² for the ego counts
+    4. ``max_whole`` keeps the whole braking of such a vehicle (6 in the first example), the
+    measure's earlier form, which overstates. The ego holds a vehicle up when:
 
     * the ego is its leader (``road.neighbour_vehicles`` on its lane finds the ego first, as
       its IDM does): the IDM acceleration with the ego as leader against the one with its
@@ -725,6 +728,7 @@ class ImposedBraking:
     def __init__(self):
         self.max_decel = 0.0
         self.max_decel_t = None
+        self.max_whole = 0.0
         self.t = 0.0
         self.road = None
         self.ego = None
@@ -784,9 +788,11 @@ class ImposedBraking:
         finally:
             road.vehicles = others
             v.target_speed = target
-        if (self.t > 0.0 and with_ego < 0.0 and with_ego < without - 1e-6
-                and -with_ego > self.max_decel):
-            self.max_decel, self.max_decel_t = -with_ego, self.t
+        if self.t > 0.0 and with_ego < 0.0 and with_ego < without - 1e-6:
+            share = min(without, 0.0) - with_ego
+            if share > self.max_decel:
+                self.max_decel, self.max_decel_t = share, self.t
+            self.max_whole = max(self.max_whole, -with_ego)
 
 
 def outcome_kind(e):
@@ -864,9 +870,11 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
         # Largest deceleration of another vehicle near the ego (OthersMonitor), m/s², and when.
         "others_max_decel_mps2": monitor.max_decel,
         "others_max_decel_t_s": monitor.max_decel_t,
-        # Largest braking the ego imposed on another vehicle (ImposedBraking), m/s², and when.
+        # Largest braking the ego imposed on another vehicle beyond the braking it would do
+        # without the ego (ImposedBraking), m/s², and when; and that vehicle's whole braking.
         "imposed_decel_mps2": imposed.max_decel,
         "imposed_decel_t_s": imposed.max_decel_t,
+        "imposed_whole_decel_mps2": imposed.max_whole,
         # Smallest centre-to-centre distance between the ego and another vehicle, m (None: the
         # ego was alone).
         "min_distance_m": None if math.isinf(monitor.min_distance) else monitor.min_distance,
@@ -881,6 +889,7 @@ def summarize(env_name, name, episodes):
     standing = [e["standing_s"] for e in episodes]
     decel = [e["others_max_decel_mps2"] for e in episodes]
     imposed = [e["imposed_decel_mps2"] for e in episodes]
+    whole = [e["imposed_whole_decel_mps2"] for e in episodes]
     dist = [e["min_distance_m"] for e in episodes if e["min_distance_m"] is not None]
     return {
         "env": env_name,
@@ -905,7 +914,9 @@ def summarize(env_name, name, episodes):
             "max_mps2": float(np.max(imposed)),
             "mean_of_episode_max_mps2": float(np.mean(imposed)),
             "episodes_harder_than_threshold": sum(d > HARD_BRAKING_MPS2 for d in imposed),
-            "threshold_mps2": HARD_BRAKING_MPS2},
+            "threshold_mps2": HARD_BRAKING_MPS2,
+            "whole_max_mps2": float(np.max(whole)),
+            "whole_episodes_harder_than_threshold": sum(d > HARD_BRAKING_MPS2 for d in whole)},
         "min_distance_m": {"min": float(np.min(dist)) if dist else None,
                            "median": float(np.median(dist)) if dist else None},
     }
@@ -957,10 +968,12 @@ def detail_lines(s):
         f"others' braking within {b['near_ego_m']:.0f} m of the ego: max {b['max_mps2']:.2f} "
         f"m/s², mean of episode maxima {b['mean_of_episode_max_mps2']:.2f} m/s², episodes "
         f"harder than {b['threshold_mps2']:.0f} m/s²: {b['episodes_harder_than_threshold']}",
-        f"braking the ego imposed (leader or regulation): max {s['imposed_braking']['max_mps2']:.2f} "
-        f"m/s², mean of episode maxima {s['imposed_braking']['mean_of_episode_max_mps2']:.2f} "
-        f"m/s², episodes harder than {s['imposed_braking']['threshold_mps2']:.0f} m/s²: "
-        f"{s['imposed_braking']['episodes_harder_than_threshold']}",
+        f"braking the ego imposed (leader or regulation, beyond the braking without the ego): "
+        f"max {s['imposed_braking']['max_mps2']:.2f} m/s², mean of episode maxima "
+        f"{s['imposed_braking']['mean_of_episode_max_mps2']:.2f} m/s², episodes harder than "
+        f"{s['imposed_braking']['threshold_mps2']:.0f} m/s²: "
+        f"{s['imposed_braking']['episodes_harder_than_threshold']} (counting the vehicle's "
+        f"whole braking: {s['imposed_braking']['whole_episodes_harder_than_threshold']})",
     ]
     if d["min"] is not None:
         lines.append(f"closest other vehicle (centre to centre): min {d['min']:.2f} m, median "

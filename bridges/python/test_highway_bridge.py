@@ -388,13 +388,15 @@ class EpisodeFields(unittest.TestCase):
 
 
 class Imposed(unittest.TestCase):
-    """The braking the ego imposes: a follower braking for the ego counts, a car braking for
-    another car does not, and the episode's first step does not."""
+    """The braking the ego imposes: a follower braking for the ego counts, beyond what it would
+    brake without the ego; a car braking for another car does not, and the episode's first step
+    does not."""
 
-    def braking(self, behind_ego):
+    def braking(self, behind_ego, car_beyond_ego=False):
         """One step with the ego standing 60 m into its approach and an IDM car 20 m behind
         it at 10 m/s (``behind_ego``), or behind a standing IDM car on another approach:
-        the imposed braking and the follower's own, m/s²."""
+        the imposed braking and the follower's own, m/s². With ``car_beyond_ego`` a standing
+        IDM car 15 m ahead of the ego makes the follower brake without the ego too."""
         sys.path.insert(0, HERE)
         import highway_bridge as hb
         from highway_env.vehicle.behavior import IDMVehicle
@@ -412,6 +414,10 @@ class Imposed(unittest.TestCase):
             follower = IDMVehicle.make_on_lane(road, approach, 40.0, speed=10.0)
             follower.plan_route_to("o1")
             road.vehicles = [ego, follower]
+            if car_beyond_ego:
+                beyond = IDMVehicle.make_on_lane(road, approach, 75.0, speed=0.0)
+                beyond.plan_route_to("o1")
+                road.vehicles.append(beyond)
             if not behind_ego:
                 leader = IDMVehicle.make_on_lane(road, approach, 60.0, speed=0.0)
                 leader.plan_route_to("o1")
@@ -428,17 +434,27 @@ class Imposed(unittest.TestCase):
             with first.attached(u):
                 env.step(np.array([0.0, 0.0], dtype=np.float32))
             self.assertEqual(first.max_decel, 0.0)
-            return imposed.max_decel, (10.0 - follower.speed) / 0.4
+            self.assertGreaterEqual(imposed.max_whole, imposed.max_decel)
+            return imposed.max_decel, (10.0 - follower.speed) / 0.4, imposed.max_whole
         finally:
             env.close()
 
     def test_a_follower_braking_for_the_ego_counts(self):
-        imposed, braked = self.braking(behind_ego=True)
+        imposed, braked, whole = self.braking(behind_ego=True)
         self.assertGreater(braked, 3.0)
         self.assertGreater(imposed, 3.0)
+        self.assertEqual(imposed, whole)  # it would not brake without the ego
+
+    def test_only_the_braking_beyond_the_one_without_the_ego_counts(self):
+        imposed, braked, whole = self.braking(behind_ego=True, car_beyond_ego=True)
+        self.assertGreater(braked, 3.0)
+        self.assertGreater(whole, 3.0)
+        # Without the ego it brakes at 3.3 m/s² for the car beyond: 2.7 of its 6 count.
+        self.assertGreater(imposed, 1.0)
+        self.assertLess(imposed, whole - 1.0)
 
     def test_braking_for_another_car_does_not(self):
-        imposed, braked = self.braking(behind_ego=False)
+        imposed, braked, _ = self.braking(behind_ego=False)
         self.assertGreater(braked, 3.0)
         self.assertEqual(imposed, 0.0)
 
