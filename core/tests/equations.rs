@@ -597,11 +597,31 @@ fn a_rolling_decelerate_candidate_can_always_still_stop_before_the_zone() {
         "commits to the crossing: s {s_h:.1}, v {v_h:.1}, stop at {stop_limit:.1}"
     );
     // Not only the best: no feasible yielding candidate over a grid of terminal states that
-    // has not cleared the zone at the horizon is past stopping at the check time.
+    // has not cleared the zone at the horizon is past stopping at the check time; and none
+    // that can still stop is refused for committing.
     let mut feasible = 0;
+    let mut can_stop = 0;
     for i in 0..=20 {
         for j in 0..=24 {
             let (t_end, v_end) = (1.0 + 0.25 * i as f64, 0.5 * j as f64);
+            let plan = concord_core::trajectory::Candidate {
+                s: Quartic::fit(start.s, start.ds, start.dds, v_end, 0.0, t_end),
+                duration: t_end,
+                ..Default::default()
+            };
+            let (s_p, v_p) = along(&plan, p.yield_check_s);
+            if v_end > 0.0
+                && along(&plan, p.horizon_s).0 < start.s + planner.clear_distance
+                && s_p + stopping(v_p) <= stop_limit - 0.05
+            {
+                assert_ne!(
+                    planner.evaluate(t_end, v_end, 0.0, &p),
+                    Err(Reject::Commits),
+                    "T {t_end}, v_T {v_end}: stops at {:.1}, before {stop_limit:.1}",
+                    s_p + stopping(v_p)
+                );
+                can_stop += 1;
+            }
             let Ok(c) = planner.evaluate(t_end, v_end, 0.0, &p) else {
                 continue;
             };
@@ -622,6 +642,10 @@ fn a_rolling_decelerate_candidate_can_always_still_stop_before_the_zone() {
         }
     }
     assert!(feasible > 0, "no feasible candidate on the grid");
+    assert!(
+        can_stop > 0,
+        "no rolling candidate that can stop on the grid"
+    );
 }
 
 #[test]
@@ -729,6 +753,22 @@ fn inside_the_junction_the_fallback_does_not_drive_on_into_a_car_standing_ahead(
         refused > 0,
         "no scene where braking was hit and driving on refused"
     );
+}
+
+#[test]
+fn the_minimum_risk_stop_brakes_just_enough_within_its_bounds() {
+    // From 10 m/s: stopping within 20 m needs 2.5 m/s², so it brakes at the 5 m/s² floor;
+    // within 8 m, 6.25 m/s²; within 2 m (or with nothing to stop for), at the 8 m/s²
+    // emergency rate.
+    let p = Params::default().trajectory;
+    let core = lone_ego(10.0);
+    let lane = *core.morphology().lane(paper::WEST_STRAIGHT);
+    for (room, decel) in [(20.0, 5.0), (8.0, 6.25), (2.0, 8.0), (f64::INFINITY, 8.0)] {
+        let mut out = Trajectory::default();
+        core.planner().minimum_risk(room, &lane, &p, &mut out);
+        let a = out.points()[0].accel;
+        assert!((a + decel).abs() < 1e-9, "stop within {room} m: {a} m/s²");
+    }
 }
 
 #[test]
@@ -877,13 +917,21 @@ fn table2_the_lateral_jerk_limit_holds_between_the_ends() {
 #[test]
 fn table2_score_weighs_time_longitudinal_and_lateral_jerk_and_the_offset() {
     // S_k = c_e·T_n/T_ref + c_s·(∫|s⃛| + ∫|l⃛|)/J_max + c_l·|l_T|/l_max, each integral
-    // computed here numerically from the candidate's polynomials.
+    // computed here numerically from the candidate's polynomials; from a start at rest
+    // acceleration and from one already accelerating at 1 m/s².
     let p = Params::default().trajectory;
     let core = lone_ego(10.0);
-    let planner = core.planner();
+    let mut planner = *core.planner();
     let s0 = planner.start.s;
     let goal = s0 + Params::default().choice.reference_speed_mps * p.t_ref_s;
-    for (t_end, v_end, l_end) in [(3.0, 12.0, 0.0), (3.0, 12.0, 0.5), (2.5, 8.0, -0.4)] {
+    for (a0, t_end, v_end, l_end) in [
+        (0.0, 3.0, 12.0, 0.0),
+        (0.0, 3.0, 12.0, 0.5),
+        (0.0, 2.5, 8.0, -0.4),
+        (1.0, 3.0, 12.0, 0.0),
+        (1.0, 2.0, 11.0, 0.3),
+    ] {
+        planner.start.dds = a0;
         let c = planner.evaluate(t_end, v_end, l_end, &p).expect("feasible");
         let n = 100_000;
         let dt = t_end / n as f64;
@@ -914,7 +962,7 @@ fn table2_score_weighs_time_longitudinal_and_lateral_jerk_and_the_offset() {
             + p.c_lateral * l_end.abs() / p.max_lateral_offset_m;
         assert!(
             (c.score - expected).abs() < 2e-3,
-            "({t_end}, {v_end}, {l_end}): {} vs {expected} (jerk {js:.3} + {jl:.3})",
+            "a₀ {a0}, ({t_end}, {v_end}, {l_end}): {} vs {expected} (jerk {js:.3} + {jl:.3})",
             c.score
         );
         if l_end != 0.0 {

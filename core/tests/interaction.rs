@@ -390,6 +390,36 @@ fn yielding_to_a_car_that_waits_itself_costs_the_deadlock_wait() {
 }
 
 #[test]
+fn a_goal_at_the_yield_point_is_reached_when_the_stop_is_whatever_the_wait() {
+    // From 8 m/s, braking at 1.6 m/s² stops in 5 s exactly at the yield point, 20 m ahead,
+    // where the goal distance ends too: waiting there afterwards delays nothing.
+    let p = ChoiceParams::default();
+    let ctx = EgoContext {
+        speed: 8.0,
+        speed_cap: 10.0,
+        yield_distance: 20.0,
+        goal_distance: 20.0,
+        min_duration: 1.0,
+        max_duration: 6.0,
+        yield_check_s: 1.0,
+        ..EgoContext::default()
+    };
+    let stop = Profile {
+        accel: -1.6,
+        duration: 5.0,
+        stop_m: 20.0,
+        ..Profile::default()
+    };
+    let free = 20.0 / p.reference_speed_mps;
+    for wait in [0.0, 10.0] {
+        assert!(
+            (efficiency(&stop, &ctx, wait, &p) - free / 5.0).abs() < 1e-9,
+            "wait {wait}"
+        );
+    }
+}
+
+#[test]
 fn the_waiting_point_keeps_the_footprint_outside_every_crossing_lane() {
     // Far enough back to stop comfortably, the CAV yields to the HDV at the stop line, not
     // inside the junction, where its footprint would be in the north-south lanes.
