@@ -110,6 +110,11 @@ Per episode (``--json``: ``episodes``), besides collision, arrival and speed:
 * ``min_distance_m``: the smallest centre-to-centre distance between the ego and any other
   vehicle at the reset and the end of each step (cars on the adjacent opposite lane pass 4 m
   apart; two 5 m x 2 m cars touch at 2 m side by side).
+* ``crash_other_speed_mps``: in a collision, the speed along its own heading of the nearest
+  other crashed vehicle, m/s (None without a collision). Negative: it was driving backwards
+  (highway-env's IDM lets a car reverse, down to its MIN_SPEED of -40 m/s, when it stands
+  closer to its leader than its desired gap); the summary counts those collisions apart as
+  ``collisions_reversing``.
 
 Oracle ceiling (``--oracle-ceiling``, intersection only; highway_oracle.py documents it): for
 each seed the environment is reset exactly as a ``--policy concord`` run resets it
@@ -662,6 +667,8 @@ NEAR_EGO_M = 30.0
 # intersection-v0 gives its traffic (IDM may brake at up to its ACC_MAX, 6 m/s², when a gap
 # closes or a car is told to yield by RegulatedRoad).
 HARD_BRAKING_MPS2 = 3.0
+# A vehicle slower than -REVERSING_MPS along its heading drives backwards, m/s.
+REVERSING_MPS = 0.1
 OUTCOMES = ("arrived", "time_limit", "crash", "decision_timeout")
 
 
@@ -795,6 +802,14 @@ class ImposedBraking:
             self.max_whole = max(self.max_whole, -with_ego)
 
 
+def crash_other_speed(u):
+    """The speed along its heading of the crashed vehicle nearest the ego, m/s (None: none)."""
+    hit = [v for v in u.road.vehicles if v is not u.vehicle and v.crashed]
+    if not hit:
+        return None
+    return float(min(hit, key=lambda v: np.linalg.norm(v.position - u.vehicle.position)).speed)
+
+
 def outcome_kind(e):
     """How an episode ended: a collision, an arrival, Concord's decision timeout or the time
     limit (the environment's duration or the bridge's own)."""
@@ -817,6 +832,7 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
     maneuvers = {}
     crashed = arrived = False
     standing_steps = 0
+    crash_speed = None
     monitor = OthersMonitor(u, period)
     imposed = ImposedBraking()
     limit = spec["time_limit_s"]
@@ -844,6 +860,8 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
             standing_steps += 1
         monitor.observe(u, steps * period)
         crashed = bool(u.vehicle.crashed)
+        if crashed and crash_speed is None:
+            crash_speed = crash_other_speed(u)
         arrived = spec["arrived"](u)
         if verbose and name == "concord":
             print(f"  seed {seed} t={steps * period:5.2f} pos=({u.vehicle.position[0]:6.1f},"
@@ -878,6 +896,7 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
         # Smallest centre-to-centre distance between the ego and another vehicle, m (None: the
         # ego was alone).
         "min_distance_m": None if math.isinf(monitor.min_distance) else monitor.min_distance,
+        "crash_other_speed_mps": crash_speed,
     }
     e["outcome"] = outcome_kind(e)
     return e
@@ -896,6 +915,8 @@ def summarize(env_name, name, episodes):
         "policy": name,
         "seeds": n,
         "collision_rate": sum(e["crashed"] for e in episodes) / n,
+        "collisions_reversing": sum(e["crashed"] and (e.get("crash_other_speed_mps") or 0.0)
+                                    < -REVERSING_MPS for e in episodes),
         "success_rate": sum(e["arrived"] for e in episodes) / n,
         "timeouts": sum(e["timed_out"] for e in episodes),
         "mean_speed_mps": sum(e["speed_sum"] for e in episodes) / max(steps, 1),
@@ -962,7 +983,8 @@ def detail_lines(s):
     """The new summary numbers, printed before the final summary line."""
     o, st, b, d = s["outcomes"], s["standing_s"], s["others_braking"], s["min_distance_m"]
     lines = [
-        "outcomes: " + ", ".join(f"{k} {o[k]}" for k in OUTCOMES),
+        "outcomes: " + ", ".join(f"{k} {o[k]}" for k in OUTCOMES)
+        + f" (crashes with a car driving backwards: {s['collisions_reversing']})",
         f"standing (ego < {st['threshold_mps']} m/s): mean {st['mean']:.2f} s, median "
         f"{st['median']:.2f} s, max {st['max']:.2f} s per episode",
         f"others' braking within {b['near_ego_m']:.0f} m of the ego: max {b['max_mps2']:.2f} "
@@ -1089,7 +1111,10 @@ def main(argv=None):
                   f"mean speed {e['mean_speed']:4.1f} m/s, route {e['final_progress_m']:5.1f} m, "
                   f"standing {e['standing_s']:4.1f} s, others' braking "
                   f"{e['others_max_decel_mps2']:4.1f} m/s² (imposed "
-                  f"{e['imposed_decel_mps2']:3.1f}), minimum-risk {e['minimum_risk']}",
+                  f"{e['imposed_decel_mps2']:3.1f}), minimum-risk {e['minimum_risk']}"
+                  + (f", hit by a car driving backwards at {-e['crash_other_speed_mps']:.1f} m/s"
+                     if e["crashed"] and (e["crash_other_speed_mps"] or 0.0) < -REVERSING_MPS
+                     else ""),
                   flush=True)
     finally:
         if policy is not None:

@@ -387,6 +387,46 @@ class EpisodeFields(unittest.TestCase):
                                           "timed_out": True}), "decision_timeout")
 
 
+class Reversing(unittest.TestCase):
+    """A collision with a car that drives backwards is told apart: the crashed car's speed
+    along its heading is negative, and the summary counts it."""
+
+    def test_a_car_backing_into_the_standing_ego(self):
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+        from highway_env.vehicle.kinematics import Vehicle
+
+        env = hb.make_env("intersection-v0", "concord", 5, hb.ENVS["intersection-v0"])
+        try:
+            env.reset(seed=0)
+            u = env.unwrapped
+            road, ego = u.road, u.vehicle
+            lane = road.network.get_lane(("o0", "ir0", 0))
+            ego.position = lane.position(60.0, 0.0)
+            ego.heading = lane.heading_at(60.0)
+            ego.speed = 0.0
+            self.assertIsNone(hb.crash_other_speed(u))
+            # A car 3 m ahead of the ego's front, facing the same way, backing at 4 m/s.
+            back = Vehicle.make_on_lane(road, ("o0", "ir0", 0), 68.0, speed=-4.0)
+            back.route = [("o0", "ir0", 0)]
+            road.vehicles = [ego, back]
+            for _ in range(5):
+                env.step(np.array([0.0, 0.0], dtype=np.float32))
+                if ego.crashed:
+                    break
+            self.assertTrue(ego.crashed)
+            self.assertLess(hb.crash_other_speed(u), -hb.REVERSING_MPS)
+        finally:
+            env.close()
+        e = {"crashed": True, "arrived": False, "timed_out": False, "steps": 1, "speed_sum": 0.0,
+             "decisions": 1, "minimum_risk": 0, "standing_s": 0.0, "others_max_decel_mps2": 0.0,
+             "imposed_decel_mps2": 0.0, "imposed_whole_decel_mps2": 0.0, "min_distance_m": 2.0,
+             "outcome": "crash"}
+        episodes = [dict(e, crash_other_speed_mps=v) for v in (-3.0, 2.0, 3.0, None)]
+        self.assertEqual(hb.summarize("intersection-v0", "concord", episodes)
+                         ["collisions_reversing"], 1)
+
+
 class Imposed(unittest.TestCase):
     """The braking the ego imposes: a follower braking for the ego counts, beyond what it would
     brake without the ego; a car braking for another car does not, and the episode's first step
