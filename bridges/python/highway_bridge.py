@@ -114,7 +114,9 @@ Per episode (``--json``: ``episodes``), besides collision, arrival and speed:
   other crashed vehicle, m/s (None without a collision). Negative: it was driving backwards
   (highway-env's IDM lets a car reverse, down to its MIN_SPEED of -40 m/s, when it stands
   closer to its leader than its desired gap); the summary counts those collisions apart as
-  ``collisions_reversing``.
+  ``collisions_reversing``. ``crash_other_had_crashed``: that vehicle had already crashed into
+  another before the step (highway-env lets a crashed car slide on along its frozen heading
+  while it slows); the summary counts those as ``collisions_with_crashed``.
 
 Oracle ceiling (``--oracle-ceiling``, intersection only; highway_oracle.py documents it): for
 each seed the environment is reset exactly as a ``--policy concord`` run resets it
@@ -802,12 +804,14 @@ class ImposedBraking:
             self.max_whole = max(self.max_whole, -with_ego)
 
 
-def crash_other_speed(u):
-    """The speed along its heading of the crashed vehicle nearest the ego, m/s (None: none)."""
+def crash_other(u, crashed_before=()):
+    """The crashed vehicle nearest the ego: its speed along its heading, m/s, and whether it
+    is one of ``crashed_before`` (vehicles that had crashed before the step); None: none."""
     hit = [v for v in u.road.vehicles if v is not u.vehicle and v.crashed]
     if not hit:
         return None
-    return float(min(hit, key=lambda v: np.linalg.norm(v.position - u.vehicle.position)).speed)
+    v = min(hit, key=lambda v: np.linalg.norm(v.position - u.vehicle.position))
+    return float(v.speed), any(v is w for w in crashed_before)
 
 
 def outcome_kind(e):
@@ -832,7 +836,7 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
     maneuvers = {}
     crashed = arrived = False
     standing_steps = 0
-    crash_speed = None
+    crash = None
     monitor = OthersMonitor(u, period)
     imposed = ImposedBraking()
     limit = spec["time_limit_s"]
@@ -852,6 +856,7 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
         else:
             action = discrete
         imposed.t = steps * period
+        crashed_before = [v for v in u.road.vehicles if v.crashed]
         with imposed.attached(u):
             obs, _, terminated, truncated, info = env.step(action)
         steps += 1
@@ -860,8 +865,8 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
             standing_steps += 1
         monitor.observe(u, steps * period)
         crashed = bool(u.vehicle.crashed)
-        if crashed and crash_speed is None:
-            crash_speed = crash_other_speed(u)
+        if crashed and crash is None:
+            crash = crash_other(u, crashed_before)
         arrived = spec["arrived"](u)
         if verbose and name == "concord":
             print(f"  seed {seed} t={steps * period:5.2f} pos=({u.vehicle.position[0]:6.1f},"
@@ -896,7 +901,8 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
         # Smallest centre-to-centre distance between the ego and another vehicle, m (None: the
         # ego was alone).
         "min_distance_m": None if math.isinf(monitor.min_distance) else monitor.min_distance,
-        "crash_other_speed_mps": crash_speed,
+        "crash_other_speed_mps": crash[0] if crash else None,
+        "crash_other_had_crashed": crash[1] if crash else None,
     }
     e["outcome"] = outcome_kind(e)
     return e
@@ -917,6 +923,8 @@ def summarize(env_name, name, episodes):
         "collision_rate": sum(e["crashed"] for e in episodes) / n,
         "collisions_reversing": sum(e["crashed"] and (e.get("crash_other_speed_mps") or 0.0)
                                     < -REVERSING_MPS for e in episodes),
+        "collisions_with_crashed": sum(bool(e["crashed"] and e.get("crash_other_had_crashed"))
+                                       for e in episodes),
         "success_rate": sum(e["arrived"] for e in episodes) / n,
         "timeouts": sum(e["timed_out"] for e in episodes),
         "mean_speed_mps": sum(e["speed_sum"] for e in episodes) / max(steps, 1),
@@ -984,7 +992,8 @@ def detail_lines(s):
     o, st, b, d = s["outcomes"], s["standing_s"], s["others_braking"], s["min_distance_m"]
     lines = [
         "outcomes: " + ", ".join(f"{k} {o[k]}" for k in OUTCOMES)
-        + f" (crashes with a car driving backwards: {s['collisions_reversing']})",
+        + f" (crashes with a car driving backwards: {s['collisions_reversing']}, with a car "
+        f"that had already crashed: {s['collisions_with_crashed']})",
         f"standing (ego < {st['threshold_mps']} m/s): mean {st['mean']:.2f} s, median "
         f"{st['median']:.2f} s, max {st['max']:.2f} s per episode",
         f"others' braking within {b['near_ego_m']:.0f} m of the ego: max {b['max_mps2']:.2f} "
@@ -1114,7 +1123,9 @@ def main(argv=None):
                   f"{e['imposed_decel_mps2']:3.1f}), minimum-risk {e['minimum_risk']}"
                   + (f", hit by a car driving backwards at {-e['crash_other_speed_mps']:.1f} m/s"
                      if e["crashed"] and (e["crash_other_speed_mps"] or 0.0) < -REVERSING_MPS
-                     else ""),
+                     else "")
+                  + (", hit by a car that had already crashed"
+                     if e["crashed"] and e["crash_other_had_crashed"] else ""),
                   flush=True)
     finally:
         if policy is not None:

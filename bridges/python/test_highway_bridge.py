@@ -405,7 +405,7 @@ class Reversing(unittest.TestCase):
             ego.position = lane.position(60.0, 0.0)
             ego.heading = lane.heading_at(60.0)
             ego.speed = 0.0
-            self.assertIsNone(hb.crash_other_speed(u))
+            self.assertIsNone(hb.crash_other(u))
             # A car 3 m ahead of the ego's front, facing the same way, backing at 4 m/s.
             back = Vehicle.make_on_lane(road, ("o0", "ir0", 0), 68.0, speed=-4.0)
             back.route = [("o0", "ir0", 0)]
@@ -415,16 +415,20 @@ class Reversing(unittest.TestCase):
                 if ego.crashed:
                     break
             self.assertTrue(ego.crashed)
-            self.assertLess(hb.crash_other_speed(u), -hb.REVERSING_MPS)
+            speed, had_crashed = hb.crash_other(u, [])
+            self.assertLess(speed, -hb.REVERSING_MPS)
+            self.assertFalse(had_crashed)
+            self.assertTrue(hb.crash_other(u, [back])[1])
         finally:
             env.close()
         e = {"crashed": True, "arrived": False, "timed_out": False, "steps": 1, "speed_sum": 0.0,
              "decisions": 1, "minimum_risk": 0, "standing_s": 0.0, "others_max_decel_mps2": 0.0,
              "imposed_decel_mps2": 0.0, "imposed_whole_decel_mps2": 0.0, "min_distance_m": 2.0,
              "outcome": "crash"}
-        episodes = [dict(e, crash_other_speed_mps=v) for v in (-3.0, 2.0, 3.0, None)]
-        self.assertEqual(hb.summarize("intersection-v0", "concord", episodes)
-                         ["collisions_reversing"], 1)
+        episodes = [dict(e, crash_other_speed_mps=v, crash_other_had_crashed=c)
+                    for v, c in ((-3.0, False), (2.0, True), (3.0, False), (None, None))]
+        s = hb.summarize("intersection-v0", "concord", episodes)
+        self.assertEqual((s["collisions_reversing"], s["collisions_with_crashed"]), (1, 1))
 
 
 class Imposed(unittest.TestCase):
