@@ -387,6 +387,18 @@ class EpisodeFields(unittest.TestCase):
                                           "timed_out": True}), "decision_timeout")
 
 
+def _standing_ego(hb):
+    """An intersection-v0 env reset at seed 0 with the ego standing 60 m into its approach."""
+    env = hb.make_env("intersection-v0", "concord", 5, hb.ENVS["intersection-v0"])
+    env.reset(seed=0)
+    u = env.unwrapped
+    lane = u.road.network.get_lane(("o0", "ir0", 0))
+    u.vehicle.position = lane.position(60.0, 0.0)
+    u.vehicle.heading = lane.heading_at(60.0)
+    u.vehicle.speed = 0.0
+    return env, u
+
+
 class Reversing(unittest.TestCase):
     """A collision with a car that drives backwards is told apart: the crashed car's speed
     along its heading is negative, and the summary counts it."""
@@ -396,15 +408,9 @@ class Reversing(unittest.TestCase):
         import highway_bridge as hb
         from highway_env.vehicle.kinematics import Vehicle
 
-        env = hb.make_env("intersection-v0", "concord", 5, hb.ENVS["intersection-v0"])
+        env, u = _standing_ego(hb)
         try:
-            env.reset(seed=0)
-            u = env.unwrapped
             road, ego = u.road, u.vehicle
-            lane = road.network.get_lane(("o0", "ir0", 0))
-            ego.position = lane.position(60.0, 0.0)
-            ego.heading = lane.heading_at(60.0)
-            ego.speed = 0.0
             self.assertIsNone(hb.crash_other(u))
             # A car 3 m ahead of the ego's front, facing the same way, backing at 4 m/s.
             back = Vehicle.make_on_lane(road, ("o0", "ir0", 0), 68.0, speed=-4.0)
@@ -445,15 +451,9 @@ class Imposed(unittest.TestCase):
         import highway_bridge as hb
         from highway_env.vehicle.behavior import IDMVehicle
 
-        env = hb.make_env("intersection-v0", "concord", 5, hb.ENVS["intersection-v0"])
+        env, u = _standing_ego(hb)
         try:
-            env.reset(seed=0)
-            u = env.unwrapped
             road, ego = u.road, u.vehicle
-            lane = road.network.get_lane(("o0", "ir0", 0))
-            ego.position = lane.position(60.0, 0.0)
-            ego.heading = lane.heading_at(60.0)
-            ego.speed = 0.0
             approach = ("o0", "ir0", 0) if behind_ego else ("o2", "ir2", 0)
             follower = IDMVehicle.make_on_lane(road, approach, 40.0, speed=10.0)
             follower.plan_route_to("o1")

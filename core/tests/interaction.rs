@@ -370,11 +370,18 @@ fn yielding_to_a_car_that_waits_itself_costs_the_deadlock_wait() {
     let waiting = expected_wait(&[c], &[1.0], &opm, &ip);
     assert!((waiting - ip.deadlock_wait_s).abs() < 1e-9);
     assert!(moving < 2.0, "{moving}");
+    let (ctx, stop) = braking_to_the_yield_point(5.0, 8.0, 20.0);
+    assert!(efficiency(&stop, &ctx, waiting, &p) < efficiency(&stop, &ctx, moving, &p));
+}
+
+/// An ego at `speed` m/s whose yield point is `yield_m` m ahead and whose goal distance is
+/// `goal_m`, and the stop at 1.6 m/s² that ends at that point.
+fn braking_to_the_yield_point(speed: f64, yield_m: f64, goal_m: f64) -> (EgoContext, Profile) {
     let ctx = EgoContext {
-        speed: 5.0,
+        speed,
         speed_cap: 10.0,
-        yield_distance: 8.0,
-        goal_distance: 20.0,
+        yield_distance: yield_m,
+        goal_distance: goal_m,
         min_duration: 1.0,
         max_duration: 6.0,
         yield_check_s: 1.0,
@@ -382,11 +389,11 @@ fn yielding_to_a_car_that_waits_itself_costs_the_deadlock_wait() {
     };
     let stop = Profile {
         accel: -1.6,
-        duration: 3.2,
-        stop_m: 8.0,
+        duration: speed / 1.6,
+        stop_m: yield_m,
         ..Profile::default()
     };
-    assert!(efficiency(&stop, &ctx, waiting, &p) < efficiency(&stop, &ctx, moving, &p));
+    (ctx, stop)
 }
 
 #[test]
@@ -394,22 +401,7 @@ fn a_goal_at_the_yield_point_is_reached_when_the_stop_is_whatever_the_wait() {
     // From 8 m/s, braking at 1.6 m/s² stops in 5 s exactly at the yield point, 20 m ahead,
     // where the goal distance ends too: waiting there afterwards delays nothing.
     let p = ChoiceParams::default();
-    let ctx = EgoContext {
-        speed: 8.0,
-        speed_cap: 10.0,
-        yield_distance: 20.0,
-        goal_distance: 20.0,
-        min_duration: 1.0,
-        max_duration: 6.0,
-        yield_check_s: 1.0,
-        ..EgoContext::default()
-    };
-    let stop = Profile {
-        accel: -1.6,
-        duration: 5.0,
-        stop_m: 20.0,
-        ..Profile::default()
-    };
+    let (ctx, stop) = braking_to_the_yield_point(8.0, 20.0, 20.0);
     let free = 20.0 / p.reference_speed_mps;
     for wait in [0.0, 10.0] {
         assert!(
