@@ -1385,8 +1385,8 @@ impl Planner {
     /// the one with the latest contact, unless that candidate's own footprint is predicted to
     /// collide more than [`DRIVE_ON_STEPS`] steps before the braking's (it would run into a
     /// car ahead, a leader standing in the exit, say, which braking avoids). Drive-on
-    /// candidates are searched with
-    /// `fallback_samples`. Returns the index of the profile taken (`None`: braking).
+    /// candidates are searched with `fallback_samples`. Returns the index of the profile
+    /// taken (`None`: braking).
     pub fn fallback(
         &mut self,
         stop_distance: f64,
@@ -1553,8 +1553,9 @@ mod tests {
     #[test]
     fn a_margin_inside_a_footprint_box_leaves_its_rectangle_exact() {
         // A car's 10 × 8 m box with its 4.8 × 2 m rectangle at (5, 0), then a margin within
-        // the box: the ego 3.5 m to the side of the car is inside the box but clear of the
-        // rectangle, so it meets nothing (the box would block all of itself without it).
+        // the box and the same footprint again: the ego 3.5 m to the side of the car is inside
+        // the box but clear of the rectangle, so it still meets nothing (had either addition
+        // stripped the box of its rectangle, all of the box would block).
         let mut occ = Occupancy::default();
         for (k, x) in occ.frame.x.iter_mut().enumerate() {
             *x = k as f64;
