@@ -511,8 +511,9 @@ impl DecisionCore {
 
     /// Distance, m, within which the ego must stop behind its car-following leader should the
     /// leader brake at `emergency_brake_mps2` from now: the centre gap less a car length and
-    /// `stop_margin_m`, plus the leader's own stopping distance (∞ without a leader).
-    fn leader_stop_distance(&self) -> f64 {
+    /// `stop_margin_m`, plus the leader's own stopping distance (∞ without a leader): where the
+    /// minimum-risk fallback stops at the latest, with the yield point.
+    pub fn leader_stop_distance(&self) -> f64 {
         let t = &self.params.trajectory;
         self.triplet.leader.map_or(f64::INFINITY, |l| {
             l.gap_m - t.vehicle_length_m - t.stop_margin_m

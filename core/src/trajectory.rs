@@ -1414,6 +1414,7 @@ impl Planner {
         for (k, profile) in drive_on.iter().enumerate() {
             self.sample(profile, p.later_samples(), cycle, p);
             if let Some((c, t)) = self.latest_contact(p.later_samples(), p) {
+                // Inside the junction the candidate is rendered to check its own collision.
                 let clears = if clear_out {
                     self.render(&c, lane, &mut candidate);
                     self.first_collision(&candidate)
@@ -1424,7 +1425,11 @@ impl Planner {
                 if t > latest || (clears && taken.is_none()) {
                     latest = t;
                     taken = Some(k);
-                    self.render(&c, lane, out);
+                    if clear_out {
+                        *out = candidate;
+                    } else {
+                        self.render(&c, lane, out);
+                    }
                 }
             }
         }
@@ -1501,12 +1506,9 @@ mod tests {
         let p = Params::default().trajectory;
         let mut planner = Planner {
             start: FrenetState {
-                s: 0.0,
                 ds: 8.0,
-                dds: 0.0,
                 l: 0.3,
-                dl: 0.0,
-                ddl: 0.0,
+                ..FrenetState::default()
             },
             ..Planner::default()
         };

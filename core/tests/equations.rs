@@ -727,15 +727,8 @@ fn inside_the_junction_the_fallback_does_not_drive_on_into_a_car_standing_ahead(
             }
             let planner = *core.planner();
             let mut braking = concord_core::Trajectory::default();
-            // Where the core's fallback brakes to: before the zone, or where it stops behind
-            // its leader should the leader brake at the emergency rate.
-            let room =
-                planner
-                    .yield_distance
-                    .min(core.triplet().leader.map_or(f64::INFINITY, |l| {
-                        l.gap_m - t.vehicle_length_m - t.stop_margin_m
-                            + l.speed_mps * l.speed_mps / (2.0 * t.emergency_brake_mps2)
-                    }));
+            // Where the core's fallback brakes to: before the zone or behind its leader.
+            let room = planner.yield_distance.min(core.leader_stop_distance());
             planner.minimum_risk(room, &lane, &t, &mut braking);
             let Some(t_brake) = planner.first_collision(&braking) else {
                 continue;
