@@ -110,6 +110,13 @@ Per episode (``--json``: ``episodes``), besides collision, arrival and speed:
 * ``min_distance_m``: the smallest centre-to-centre distance between the ego and any other
   vehicle at the reset and the end of each step (cars on the adjacent opposite lane pass 4 m
   apart; two 5 m x 2 m cars touch at 2 m side by side).
+* ``min_pet_s`` (and ``min_pet_t_s``): the smallest post-encroachment time between the ego
+  and another vehicle crossing or merging with it, s (None: no encroachment): on a 0.5 m grid
+  at every simulation frame (1/15 s), the time between one vehicle's footprint leaving a cell
+  and the other's entering it, 0 when both cover it at once; cells where the two headings
+  differ by 30° or less (one car following another) are left out (see ``PetTracker``).
+  Summary: the episodes with an encroachment, the smallest PET, the median of the episode
+  minima and the episodes below 0.5, 1.0 and 1.5 s.
 * ``crash_other_speed_mps``: in a collision, the speed along its own heading of the nearest
   other crashed vehicle, m/s (None without a collision). Negative: it was driving backwards
   (highway-env's IDM lets a car reverse, down to its MIN_SPEED of -40 m/s, when it stands
@@ -128,13 +135,16 @@ before the duration ends without a crash. ``--oracle-first`` stops at a seed's f
 profile (reachability only), ``--oracle-budget N`` bounds the simulated steps per seed (a seed
 whose budget runs out without an arrival is reported as undecided), ``--oracle-reuse FILE``
 takes the reachable seeds of an oracle run at a shorter duration as reachable (the same profile
-arrives at the same step) and searches the others only, ``--family`` picks the profile family,
-``--seed-list 0-99,500-599`` any seeds. The oracle prints a line per seed with its time and an
-estimate of the rest, then the reachable seeds and how many seeds each kind of profile reaches;
-``--json FILE`` writes it all. ``--ceiling FILE`` (that JSON) makes a normal run also report its
-success as a share of the reachable seeds, and list the reachable seeds it failed and the
-unreachable seeds it failed or passed (seeds the oracle left undecided are left out and listed);
-the file must have been measured with the same environment, duration and policy frequency.
+arrives at the same step) and searches the others only, ``--oracle-courteous MPS2`` and
+``--oracle-min-pet S`` count only profiles that never make another vehicle brake harder than
+MPS2 because of the ego and never pass another vehicle with a PET below S, ``--family`` picks
+the profile family, ``--seed-list 0-99,500-599`` any seeds. The oracle prints a line per seed
+with its time and an estimate of the rest, then the reachable seeds and how many seeds each
+kind of profile reaches; ``--json FILE`` writes it all. ``--ceiling FILE`` (that JSON) makes a
+normal run also report its success as a share of the reachable seeds, and list the reachable
+seeds it failed and the unreachable seeds it failed or passed (seeds the oracle left undecided
+are left out and listed); the file must have been measured with the same environment, duration
+and policy frequency.
 
 Results: per policy, collision rate, success rate (arrived without collision), mean ego speed
 (over all steps of all episodes) and the number of minimum-risk decisions, then the outcome
@@ -290,6 +300,7 @@ def make_env(env_name, policy, policy_frequency, spec):
 # highway-env's kinematic model (vehicle/kinematics.py): length 5 m, slip angle
 # beta = atan(tan(delta) / 2), heading rate = v sin(beta) / (length / 2).
 VEHICLE_LENGTH = 5.0
+VEHICLE_WIDTH = 2.0
 ACCEL_RANGE = (-8.0, 6.0)  # m/s²: Concord's emergency braking, up to the traffic's COMFORT_ACC_MAX
 STEERING_RANGE = (-math.pi / 3, math.pi / 3)  # MDPVehicle.MAX_STEERING_ANGLE
 OBSERVED = 33  # the ego and wire.MAX_AGENTS others
@@ -672,6 +683,8 @@ HARD_BRAKING_MPS2 = 3.0
 # A vehicle slower than -REVERSING_MPS along its heading drives backwards, m/s.
 REVERSING_MPS = 0.1
 OUTCOMES = ("arrived", "time_limit", "crash", "decision_timeout")
+# PET thresholds the summary counts episodes below, s (the interaction targets ask 1.5 s).
+PET_REPORT_S = (0.5, 1.0, 1.5)
 
 
 class OthersMonitor:
@@ -804,6 +817,105 @@ class ImposedBraking:
             self.max_whole = max(self.max_whole, -with_ego)
 
 
+# Cell size of the PET grid, m, and the least heading difference of an encroachment (below
+# it two vehicles follow each other, which is a headway, not a post-encroachment time).
+PET_CELL_M = 0.5
+PET_MIN_ANGLE_RAD = math.radians(30.0)
+# Sample points of a vehicle's footprint in its own frame (PET_CELL_M apart, edges included).
+_FOOTPRINT = np.array([(x, y)
+                       for x in np.linspace(-VEHICLE_LENGTH / 2, VEHICLE_LENGTH / 2, 11)
+                       for y in np.linspace(-VEHICLE_WIDTH / 2, VEHICLE_WIDTH / 2, 5)])
+
+
+def footprint_cells(position, heading):
+    """The PET grid cells (ix, iy) a 5 m x 2 m vehicle at ``position`` and ``heading`` covers."""
+    c, s = math.cos(heading), math.sin(heading)
+    pts = _FOOTPRINT @ np.array([[c, s], [-s, c]]) + np.asarray(position, dtype=float)
+    return set(map(tuple, np.floor(pts / PET_CELL_M).astype(int).tolist()))
+
+
+class PetTracker:
+    """Post-encroachment time (PET) between the ego and every other vehicle, at the
+    simulation's frame rate (15 Hz in the intersection: 1/15 s resolution).
+
+    The plane is cut into ``PET_CELL_M`` cells; each frame, each vehicle's footprint covers a
+    set of them. When one vehicle enters a cell that the other (ego against any other vehicle)
+    has occupied before, with headings more than ``PET_MIN_ANGLE_RAD`` apart (a crossing or a
+    merge, not a car following another in its lane), the time since the other was last in that
+    cell is a PET: 0 when both are in it at once. ``min_pet`` is the smallest over the episode
+    (inf: no encroachment), ``min_pet_t`` when it happened. Attached to the road
+    (``road.pet_tracker``), it is copied with the environment (the oracle's branches)."""
+
+    def __init__(self, ego):
+        self.ego = ego
+        self.t = 0.0
+        self.keys = 0
+        self.ego_cells = {}  # cell -> [last time, heading on entry]
+        self.other_cells = {}  # cell -> {vehicle key: [last time, heading on entry]}
+        self.min_pet = math.inf
+        self.min_pet_t = None
+
+    def _encroach(self, h, rec):
+        if abs(wrap(h - rec[1])) > PET_MIN_ANGLE_RAD:
+            pet = self.t - rec[0]
+            if pet < self.min_pet:
+                self.min_pet, self.min_pet_t = pet, self.t
+
+    def observe(self, road, dt):
+        """One frame of ``dt`` s has been simulated on ``road``."""
+        self.t += dt
+        t = self.t
+        entries = []
+        for v in road.vehicles:
+            key = getattr(v, "pet_key", None)
+            if key is None:
+                key = v.pet_key = self.keys
+                self.keys += 1
+            ego = v is self.ego
+            h = float(v.heading)
+            for cell in footprint_cells(v.position, h):
+                if ego:
+                    rec = self.ego_cells.get(cell)
+                else:
+                    rec = self.other_cells.setdefault(cell, {}).get(key)
+                if rec is None:
+                    entries.append((ego, key, cell, h))
+                else:
+                    rec[0] = t
+        # Entries last: a vehicle still in the cell has its time of this frame (PET 0).
+        for ego, key, cell, h in entries:
+            if ego:
+                for rec in self.other_cells.get(cell, {}).values():
+                    self._encroach(h, rec)
+                self.ego_cells[cell] = [t, h]
+            else:
+                rec = self.ego_cells.get(cell)
+                if rec is not None:
+                    self._encroach(h, rec)
+                self.other_cells[cell][key] = [t, h]
+
+    @staticmethod
+    @contextlib.contextmanager
+    def recording():
+        """While in the block, every ``Road.step`` feeds the road's ``pet_tracker``, if any
+        (highway-env is otherwise unchanged)."""
+        from highway_env.road.road import Road
+
+        orig = Road.__dict__["step"]
+
+        def step(road, dt):
+            orig(road, dt)
+            tracker = getattr(road, "pet_tracker", None)
+            if tracker is not None:
+                tracker.observe(road, dt)
+
+        Road.step = step
+        try:
+            yield
+        finally:
+            Road.step = orig
+
+
 def crash_other(u, crashed_before=()):
     """The crashed vehicle nearest the ego: its speed along its heading, m/s, and whether it
     is one of ``crashed_before`` (vehicles that had crashed before the step); None: none."""
@@ -839,6 +951,7 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
     crash = None
     monitor = OthersMonitor(u, period)
     imposed = ImposedBraking()
+    pet = u.road.pet_tracker = PetTracker(u.vehicle)
     limit = spec["time_limit_s"]
     discrete = None if name == "concord" else u.action_type.actions_indexes[DISCRETE[name]]
     while True:
@@ -857,7 +970,7 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
             action = discrete
         imposed.t = steps * period
         crashed_before = [v for v in u.road.vehicles if v.crashed]
-        with imposed.attached(u):
+        with imposed.attached(u), PetTracker.recording():
             obs, _, terminated, truncated, info = env.step(action)
         steps += 1
         speeds.append(float(u.vehicle.speed))
@@ -901,6 +1014,10 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
         # Smallest centre-to-centre distance between the ego and another vehicle, m (None: the
         # ego was alone).
         "min_distance_m": None if math.isinf(monitor.min_distance) else monitor.min_distance,
+        # Smallest post-encroachment time between the ego and another vehicle (PetTracker), s,
+        # and when (None: no crossing or merging encroachment).
+        "min_pet_s": None if math.isinf(pet.min_pet) else pet.min_pet,
+        "min_pet_t_s": pet.min_pet_t,
         "crash_other_speed_mps": crash[0] if crash else None,
         "crash_other_had_crashed": crash[1] if crash else None,
     }
@@ -916,6 +1033,7 @@ def summarize(env_name, name, episodes):
     imposed = [e["imposed_decel_mps2"] for e in episodes]
     whole = [e["imposed_whole_decel_mps2"] for e in episodes]
     dist = [e["min_distance_m"] for e in episodes if e["min_distance_m"] is not None]
+    pets = [e["min_pet_s"] for e in episodes if e.get("min_pet_s") is not None]
     return {
         "env": env_name,
         "policy": name,
@@ -948,6 +1066,10 @@ def summarize(env_name, name, episodes):
             "whole_episodes_harder_than_threshold": sum(d > HARD_BRAKING_MPS2 for d in whole)},
         "min_distance_m": {"min": float(np.min(dist)) if dist else None,
                            "median": float(np.median(dist)) if dist else None},
+        "pet_s": {"episodes": len(pets),
+                  "min": float(np.min(pets)) if pets else None,
+                  "median": float(np.median(pets)) if pets else None,
+                  "episodes_below": {str(x): sum(p < x for p in pets) for x in PET_REPORT_S}},
     }
 
 
@@ -1009,6 +1131,12 @@ def detail_lines(s):
     if d["min"] is not None:
         lines.append(f"closest other vehicle (centre to centre): min {d['min']:.2f} m, median "
                      f"of episode minima {d['median']:.2f} m")
+    p = s.get("pet_s")
+    if p and p["episodes"]:
+        lines.append(f"post-encroachment time (ego and another vehicle crossing or merging): "
+                     f"{p['episodes']} episodes with an encroachment, min {p['min']:.2f} s, "
+                     f"median of episode minima {p['median']:.2f} s, episodes below "
+                     + ", ".join(f"{x} s: {n}" for x, n in p["episodes_below"].items()))
     c = s.get("ceiling")
     if c is not None:
         share = ("n/a" if c["success_of_reachable"] is None
@@ -1076,6 +1204,9 @@ def main(argv=None):
     ap.add_argument("--oracle-courteous", type=float, default=None, metavar="MPS2",
                     help="the oracle counts only profiles that never make another vehicle brake "
                          "harder than this because of the ego (ImposedBraking), e.g. 3")
+    ap.add_argument("--oracle-min-pet", type=float, default=None, metavar="S",
+                    help="the oracle counts only profiles whose post-encroachment time with "
+                         "every other vehicle stays at least this (PetTracker), e.g. 1.5")
     ap.add_argument("--oracle-first", action="store_true",
                     help="the oracle stops at a seed's first arriving profile (reachability "
                     "only: the per-profile counts then cover the profiles tried)")
@@ -1120,7 +1251,9 @@ def main(argv=None):
                   f"mean speed {e['mean_speed']:4.1f} m/s, route {e['final_progress_m']:5.1f} m, "
                   f"standing {e['standing_s']:4.1f} s, others' braking "
                   f"{e['others_max_decel_mps2']:4.1f} m/s² (imposed "
-                  f"{e['imposed_decel_mps2']:3.1f}), minimum-risk {e['minimum_risk']}"
+                  f"{e['imposed_decel_mps2']:3.1f}), PET "
+                  + ("-" if e["min_pet_s"] is None else f"{e['min_pet_s']:.2f} s")
+                  + f", minimum-risk {e['minimum_risk']}"
                   + (f", hit by a car driving backwards at {-e['crash_other_speed_mps']:.1f} m/s"
                      if e["crashed"] and (e["crash_other_speed_mps"] or 0.0) < -REVERSING_MPS
                      else "")

@@ -49,14 +49,20 @@ profile below it. At every step the ego's state and arrival are checked to be ex
 computed without traffic (an ``AssertionError`` otherwise). The search tries the profiles in
 the order of their traffic-free arrival, the earliest first.
 
-Options (``highway_bridge.py``): ``--oracle-first`` stops a seed's search at its first arriving
-profile (reachability only; the profiles not tried are ``untried``, so the per-profile counts
-cover the profiles tried), ``--oracle-budget N`` stops it after N simulated steps (a seed without
-an arrival by then is *undecided*: counted as not reachable and listed apart),
-``--oracle-reuse FILE`` takes the reachable seeds of an oracle run of the same environment,
-frequency and family at a shorter or equal duration as they are (the duration only truncates,
-so a profile arriving in the shorter episode arrives at the same step of the longer one) and
-searches the others only, ``--family`` (``default``, ``small`` or a JSON file).
+Options (``highway_bridge.py``): ``--oracle-courteous MPS2`` ends a profile as ``forces`` at
+the first step in which it makes another vehicle brake harder than MPS2 beyond its braking
+without the ego (``highway_bridge.ImposedBraking``); ``--oracle-min-pet S`` ends it as
+``close`` at the first step in which it crosses or merges with another vehicle at a
+post-encroachment time below S (``highway_bridge.PetTracker``, which rides on the environment's
+road, so every branch carries its own history). ``--oracle-first`` stops a seed's search at its
+first arriving profile (reachability only; the profiles not tried are ``untried``, so the
+per-profile counts cover the profiles tried), ``--oracle-budget N`` stops it after N simulated
+steps (a seed without an arrival by then is *undecided*: counted as not reachable and listed
+apart), ``--oracle-reuse FILE`` takes the reachable seeds of an oracle run of the same
+environment, frequency, family and rules (courteous, PET) at a shorter or equal duration as
+they are (the duration only truncates, so a profile arriving in the shorter episode arrives at
+the same step of the longer one) and searches the others only, ``--family`` (``default``,
+``small`` or a JSON file).
 
 Speed. highway-env's intersection costs about 25 ms of CPU per 0.2 s step here even without the
 observation; about half of ``env.step`` is ``RegulatedRoad.enforce_road_rules`` predicting
@@ -451,23 +457,28 @@ class Node:
 
 
 # A profile's outcome on a seed: it arrives, crashes, imposes harder braking than allowed
-# (``forces``, with ``--oracle-courteous``), cannot arrive in time even on an empty road, or
-# was not tried (the search stopped at the first arrival).
-OUTCOMES = ("arrived", "crash", "forces", "too_slow", "untried")
+# (``forces``, with ``--oracle-courteous``), passes closer in time than allowed (``close``,
+# with ``--oracle-min-pet``), cannot arrive in time even on an empty road, or was not tried
+# (the search stopped at the first arrival).
+OUTCOMES = ("arrived", "crash", "forces", "close", "too_slow", "untried")
 
 
 class OutOfBudget(Exception):
     """The seed's step budget (``--oracle-budget``) ran out before the search ended."""
 
 
-def explore(env, node, depth, period, outcome, counters, priority, first=False, courteous=None):
+def explore(env, node, depth, period, outcome, counters, priority, first=False, courteous=None,
+            min_pet=None):
     """Depth first from ``node`` with the unwrapped environment ``env`` in its state (consumed),
     children in the order of ``priority`` (the best profile below them first). Fills
     ``outcome[profile] = (kind, time)``; with ``first``, stops at the first arrival and returns
     True. With ``courteous`` (m/s²), a step in which the ego imposes harder braking on another
     vehicle (``highway_bridge.ImposedBraking``) ends every profile below it as ``forces``; the
     first step does not count (what the traffic does then answers where the environment placed
-    the ego, e.g. close in front of a follower, not anything the ego did)."""
+    the ego, e.g. close in front of a follower, not anything the ego did). With ``min_pet``
+    (s), a step in which the ego and another vehicle cross or merge with a post-encroachment
+    time below it (``highway_bridge.PetTracker``, carried on the environment's road) ends
+    every profile below it as ``close``."""
     items = sorted(node.children.values(), key=lambda ac: min(priority[i] for i in ac[1].below))
     for n, (action, child) in enumerate(items):
         e = env if n == len(items) - 1 else copy.deepcopy(env)
@@ -492,6 +503,10 @@ def explore(env, node, depth, period, outcome, counters, priority, first=False, 
             for idx in child.below:
                 outcome[idx] = ("forces", t)
             continue
+        if min_pet is not None and e.road.pet_tracker.min_pet < min_pet:
+            for idx in child.below:
+                outcome[idx] = ("close", t)
+            continue
         if ego_state(e.vehicle) != child.state or e.has_arrived(e.vehicle) != bool(child.ends):
             raise AssertionError(f"the ego left its traffic-free course at {t:.1f} s: "
                                  f"{ego_state(e.vehicle)} != {child.state}")
@@ -500,12 +515,13 @@ def explore(env, node, depth, period, outcome, counters, priority, first=False, 
         if first and child.ends:
             return True
         if child.children and explore(e, child, depth + 1, period, outcome, counters, priority,
-                                      first, courteous):
+                                      first, courteous, min_pet):
             return True
     return False
 
 
-def oracle_seed(env, seed, profiles, period, first=False, budget=None, courteous=None):
+def oracle_seed(env, seed, profiles, period, first=False, budget=None, courteous=None,
+                min_pet=None):
     """Every profile on ``seed``: whether the seed is reachable, each profile's outcome
     (``arrived``, ``crash`` with its time, ``too_slow``: does not arrive within the duration
     even on an empty road; with ``first``, the search stops at the first arrival and the
@@ -521,8 +537,11 @@ def oracle_seed(env, seed, profiles, period, first=False, budget=None, courteous
     exhausted = False
     if root.below:
         try:
-            explore(copy.deepcopy(u0), root, 0, period, outcome, counters, priority, first,
-                    courteous)
+            start = copy.deepcopy(u0)
+            if min_pet is not None:
+                start.road.pet_tracker = hb.PetTracker(start.vehicle)
+            explore(start, root, 0, period, outcome, counters, priority, first, courteous,
+                    min_pet)
         except OutOfBudget:
             exhausted = True
     arrived = [i for i, o in enumerate(outcome) if o[0] == "arrived"]
@@ -543,17 +562,21 @@ def oracle_seed(env, seed, profiles, period, first=False, budget=None, courteous
     }
 
 
-def reusable(path, env_name, duration_s, policy_frequency, family):
+def reusable(path, env_name, duration_s, policy_frequency, family, courteous=None,
+             min_pet=None):
     """The reachable seeds of an earlier oracle run (``--oracle-reuse``) of the same
-    environment, policy frequency and family at a duration no longer than ``duration_s``:
-    {seed: its row}. A profile that arrives within a shorter episode arrives at the same step
-    of a longer one (the duration only truncates: the ego's actions and the traffic up to the
-    arrival are the same), so those seeds are reachable without a search."""
+    environment, policy frequency, family, ``courteous`` and ``min_pet`` at a duration no
+    longer than ``duration_s``: {seed: its row}. A profile that arrives within a shorter
+    episode arrives at the same step of a longer one (the duration only truncates: the ego's
+    actions and the traffic up to the arrival are the same), so those seeds are reachable
+    without a search."""
     with open(path, encoding="utf-8") as f:
         doc = json.load(f)
     o = doc["oracle"]
     if (o["env"], o["policy_frequency_hz"], o["family"]) != (env_name, policy_frequency, family):
         raise SystemExit(f"--oracle-reuse {path}: another environment, frequency or family")
+    if (o.get("max_imposed_decel_mps2"), o.get("min_pet_s")) != (courteous, min_pet):
+        raise SystemExit(f"--oracle-reuse {path}: other --oracle-courteous or --oracle-min-pet")
     if o["duration_s"] > duration_s:
         raise SystemExit(f"--oracle-reuse {path}: measured at a longer duration "
                          f"({o['duration_s']} s)")
@@ -561,7 +584,7 @@ def reusable(path, env_name, duration_s, policy_frequency, family):
 
 
 def run_oracle(env_name, spec, seeds, family, policy_frequency=5, progress=None, first=False,
-               budget=None, reuse=None, checkpoint=None, courteous=None):
+               budget=None, reuse=None, checkpoint=None, courteous=None, min_pet=None):
     """The oracle over ``seeds``; the JSON document ``--oracle-ceiling --json`` writes.
     ``reuse``: the result of ``reusable``, whose seeds are taken as they are; ``checkpoint``
     is called with the document so far after every seed."""
@@ -574,7 +597,7 @@ def run_oracle(env_name, spec, seeds, family, policy_frequency=5, progress=None,
     rows = []
     started = time.monotonic()
     try:
-        with fast_regulation():
+        with fast_regulation(), hb.PetTracker.recording():
             for n, seed in enumerate(seeds):
                 t0 = time.monotonic()
                 if seed in known:
@@ -588,7 +611,8 @@ def run_oracle(env_name, spec, seeds, family, policy_frequency=5, progress=None,
                     r["simulated_steps"] = r["copies"] = 0
                     r["cpu_s"] = 0.0
                 else:
-                    r = oracle_seed(env, seed, profiles, period, first, budget, courteous)
+                    r = oracle_seed(env, seed, profiles, period, first, budget, courteous,
+                                    min_pet)
                 r["wall_s"] = time.monotonic() - t0
                 rows.append(r)
                 if progress:
@@ -598,7 +622,8 @@ def run_oracle(env_name, spec, seeds, family, policy_frequency=5, progress=None,
                              f"{'reachable' if r['reachable'] else 'UNDECIDED' if r['undecided'] else 'UNREACHABLE':11s} "
                              f"{r['counts']['arrived']:3d} of {len(profiles)} profiles arrive "
                              f"({r['counts']['crash']} crash, "
-                             f"{r['counts'].get('forces', 0)} forcing, {r['counts']['too_slow']} too "
+                             f"{r['counts'].get('forces', 0)} forcing, "
+                             f"{r['counts'].get('close', 0)} close, {r['counts']['too_slow']} too "
                              f"slow, {r['counts']['untried']} untried), "
                              f"{r['simulated_steps']} steps, {r['wall_s']:5.1f} s; "
                              f"{per_seed:5.1f} s per seed, about "
@@ -606,15 +631,15 @@ def run_oracle(env_name, spec, seeds, family, policy_frequency=5, progress=None,
                 if checkpoint:
                     checkpoint(document(env_name, spec, family, profiles, policy_frequency,
                                         first, budget, rows, time.monotonic() - started,
-                                        courteous))
+                                        courteous, min_pet))
     finally:
         env.close()
     return document(env_name, spec, family, profiles, policy_frequency, first, budget, rows,
-                    time.monotonic() - started, courteous)
+                    time.monotonic() - started, courteous, min_pet)
 
 
 def document(env_name, spec, family, profiles, policy_frequency, first, budget, rows, wall_s,
-             courteous=None):
+             courteous=None, min_pet=None):
     per_profile = [0] * len(profiles)
     for r in rows:
         for i, o in enumerate(r["outcomes"]):
@@ -624,7 +649,7 @@ def document(env_name, spec, family, profiles, policy_frequency, first, budget, 
         "oracle": {"env": env_name, "duration_s": spec["duration_s"],
                    "policy_frequency_hz": policy_frequency, "family": family,
                    "first_arrival_only": first, "step_budget": budget,
-                   "max_imposed_decel_mps2": courteous,
+                   "max_imposed_decel_mps2": courteous, "min_pet_s": min_pet,
                    "profiles": [p["name"] for p in profiles],
                    "hold_brake_mps2": HOLD_BRAKE, "crawl_speed_mps": CRAWL_SPEED,
                    "pursuit": [PURSUIT_MIN_M, PURSUIT_TIME_S]},
@@ -682,7 +707,8 @@ def main_oracle(args, spec, seeds):
     print(f"oracle: {len(profiles_of(family))} profiles per seed, {len(seeds)} seeds",
           flush=True)
     reuse = (reusable(args.oracle_reuse, args.env, spec["duration_s"], args.policy_frequency,
-                      family) if args.oracle_reuse else None)
+                      family, args.oracle_courteous, args.oracle_min_pet)
+             if args.oracle_reuse else None)
     def write(doc):
         if args.oracle_reuse:
             doc["oracle"]["reused"] = args.oracle_reuse
@@ -694,7 +720,7 @@ def main_oracle(args, spec, seeds):
     doc = run_oracle(args.env, spec, seeds, family, args.policy_frequency,
                      progress=lambda line: print(line, flush=True), first=args.oracle_first,
                      budget=args.oracle_budget, reuse=reuse, checkpoint=write,
-                     courteous=args.oracle_courteous)
+                     courteous=args.oracle_courteous, min_pet=args.oracle_min_pet)
     write(doc)
     for line in report_lines(doc):
         print(line)

@@ -314,6 +314,7 @@ class EpisodeFields(unittest.TestCase):
             self.assertGreaterEqual(e["others_max_decel_mps2"], 0.0)
             self.assertLessEqual(e["others_max_decel_mps2"], 8.0)  # IDM's ACC_MAX is 6
             self.assertGreater(e["min_distance_m"], 0.0)
+            self.assertTrue(e["min_pet_s"] is None or e["min_pet_s"] >= 0.0, e)
         # SLOWER stops before the junction and waits out the episode (13.2 s).
         for e in episodes:
             self.assertEqual(e["outcome"], "time_limit", e)
@@ -503,6 +504,90 @@ class Imposed(unittest.TestCase):
         self.assertEqual(imposed, 0.0)
 
 
+class _Car:
+    """A vehicle for PetTracker: a position, a heading and a speed of its own."""
+
+    def __init__(self, x, y, heading, vx, vy):
+        self.start, self.heading, self.vel = np.array([x, y]), heading, np.array([vx, vy])
+        self.position = self.start.copy()
+
+
+class _Road:
+    def __init__(self, *vehicles):
+        self.vehicles = list(vehicles)
+
+
+class Pet(unittest.TestCase):
+    """Post-encroachment time: the time between one vehicle leaving a piece of road and the
+    other, crossing or merging, entering it; 0 when both are in it at once; none for a car
+    following another."""
+
+    def pet(self, ego, other, frames=120, dt=0.05):
+        """Move both cars in straight lines for ``frames`` frames and return the tracker."""
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+
+        road = _Road(other, ego)
+        tracker = hb.PetTracker(ego)
+        for k in range(1, frames + 1):
+            for v in road.vehicles:
+                v.position = v.start + v.vel * (k * dt)
+            tracker.observe(road, dt)
+        return tracker
+
+    def test_the_ego_crossing_behind_a_car(self):
+        # The other drives east through the origin at 10 m/s (its rear leaves x = 1, the ego's
+        # side, at 2.35 s); the ego drives north 1.5 s later (its front reaches y = -1, the
+        # other's side, at 3.15 s): PET 0.8 s, to within a cell and a frame.
+        other = _Car(-20.0, 0.0, 0.0, 10.0, 0.0)
+        ego = _Car(0.0, -35.0, math.pi / 2, 0.0, 10.0)
+        t = self.pet(ego, other)
+        self.assertAlmostEqual(t.min_pet, 0.8, delta=0.12)
+        self.assertAlmostEqual(t.min_pet_t, 3.15, delta=0.12)
+
+    def test_a_car_crossing_behind_the_ego(self):
+        # The same crossing with the roles swapped: the other enters where the ego was.
+        ego = _Car(-20.0, 0.0, 0.0, 10.0, 0.0)
+        other = _Car(0.0, -35.0, math.pi / 2, 0.0, 10.0)
+        self.assertAlmostEqual(self.pet(ego, other).min_pet, 0.8, delta=0.12)
+
+    def test_both_in_the_crossing_at_once(self):
+        other = _Car(-20.0, 0.0, 0.0, 10.0, 0.0)
+        ego = _Car(0.0, -20.0, math.pi / 2, 0.0, 10.0)
+        self.assertEqual(self.pet(ego, other).min_pet, 0.0)
+
+    def test_following_in_a_lane_is_no_encroachment(self):
+        other = _Car(-10.0, 0.0, 0.0, 10.0, 0.0)
+        ego = _Car(-20.0, 0.0, 0.0, 10.0, 0.0)
+        t = self.pet(ego, other)
+        self.assertEqual(t.min_pet, math.inf)
+        self.assertIsNone(t.min_pet_t)
+
+    def test_a_merge_at_an_angle_counts(self):
+        # The other comes into the ego's lane at 45 degrees and reaches (-10, 0) at 2 s, 1 s
+        # after the ego's centre.
+        ego = _Car(-20.0, 0.0, 0.0, 10.0, 0.0)
+        d = 10.0 / math.sqrt(2.0)
+        other = _Car(-10.0 - 2.0 * d, -2.0 * d, math.pi / 4, d, d)
+        t = self.pet(ego, other, frames=60)
+        self.assertGreater(t.min_pet, 0.3)
+        self.assertLess(t.min_pet, 1.2)
+
+    def test_summary_counts_episodes_below_each_threshold(self):
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+
+        e = {"crashed": False, "arrived": True, "timed_out": False, "steps": 1, "speed_sum": 0.0,
+             "decisions": 1, "minimum_risk": 0, "standing_s": 0.0, "others_max_decel_mps2": 0.0,
+             "imposed_decel_mps2": 0.0, "imposed_whole_decel_mps2": 0.0, "min_distance_m": 2.0,
+             "outcome": "arrived"}
+        episodes = [dict(e, min_pet_s=p) for p in (0.2, 0.7, 1.2, 2.0, None)]
+        p = hb.summarize("intersection-v0", "concord", episodes)["pet_s"]
+        self.assertEqual(p["episodes"], 4)
+        self.assertEqual(p["min"], 0.2)
+        self.assertEqual(p["episodes_below"], {"0.5": 1, "1.0": 2, "1.5": 3})
+
+
 def _states(u):
     sys.path.insert(0, HERE)
     import highway_oracle as ho
@@ -640,6 +725,19 @@ class OracleReplay(unittest.TestCase):
         self.assertNotIn("reused_from_duration_s", doc20["seeds"][1])
         self.assertGreater(doc20["seeds"][1]["simulated_steps"], 0)
         self.assertEqual(doc20["oracle"]["duration_s"], 20.0)
+        # Asking every encroachment to keep a PET no profile can keep: no profile arrives, and
+        # the ones that came closest end as ``close``; a search without that rule is not reused.
+        doc_pet = ho.run_oracle(name, spec, seeds[:1], family, min_pet=1e9)
+        r = doc_pet["seeds"][0]
+        self.assertEqual(doc_pet["oracle"]["min_pet_s"], 1e9)
+        self.assertFalse(r["reachable"], r)
+        self.assertGreater(r["counts"]["close"], 0, r)
+        with tempfile.TemporaryDirectory() as tmp:
+            path = os.path.join(tmp, "oracle.json")
+            with open(path, "w", encoding="utf-8") as f:
+                json.dump(doc, f)
+            with self.assertRaises(SystemExit):
+                ho.reusable(path, name, 20.0, 5, family, min_pet=1.5)
 
 
 if __name__ == "__main__":
