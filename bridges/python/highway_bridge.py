@@ -111,12 +111,9 @@ Per episode (``--json``: ``episodes``), besides collision, arrival and speed:
   vehicle at the reset and the end of each step (cars on the adjacent opposite lane pass 4 m
   apart; two 5 m x 2 m cars touch at 2 m side by side).
 * ``min_pet_s`` (and ``min_pet_t_s``): the smallest post-encroachment time between the ego
-  and another vehicle crossing or merging with it, s (None: no encroachment): on a 0.5 m grid
-  at every simulation frame (1/15 s), the time between one vehicle's footprint leaving a cell
-  and the other's entering it, 0 when both cover it at once; cells where the two headings
-  differ by 30° or less (one car following another) are left out (see ``PetTracker``).
-  Summary: the episodes with an encroachment, the smallest PET, the median of the episode
-  minima and the episodes below 0.5, 1.0 and 1.5 s.
+  and another vehicle crossing or merging with it, s (None: no encroachment; ``PetTracker``
+  defines it). Summary: the episodes with an encroachment, the smallest PET, the median of
+  the episode minima and the episodes below 0.5, 1.0 and 1.5 s.
 * ``crash_other_speed_mps``: in a collision, the speed along its own heading of the nearest
   other crashed vehicle, m/s (None without a collision). Negative: it was driving backwards
   (highway-env's IDM lets a car reverse, down to its MIN_SPEED of -40 m/s, when it stands
@@ -954,39 +951,40 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
     pet = u.road.pet_tracker = PetTracker(u.vehicle)
     limit = spec["time_limit_s"]
     discrete = None if name == "concord" else u.action_type.actions_indexes[DISCRETE[name]]
-    while True:
-        sim_time = steps * period
-        if name == "concord":
-            action, d = policy.act(obs, sim_time)
-            if action is None:
-                timed_out = True
+    with PetTracker.recording():
+        while True:
+            sim_time = steps * period
+            if name == "concord":
+                action, d = policy.act(obs, sim_time)
+                if action is None:
+                    timed_out = True
+                    break
+                decisions += 1
+                if wire.SOURCES[d.source] == "minimum_risk":
+                    min_risk += 1
+                m = wire.MANEUVERS[d.maneuver]
+                maneuvers[m] = maneuvers.get(m, 0) + 1
+            else:
+                action = discrete
+            imposed.t = steps * period
+            crashed_before = [v for v in u.road.vehicles if v.crashed]
+            with imposed.attached(u):
+                obs, _, terminated, truncated, info = env.step(action)
+            steps += 1
+            speeds.append(float(u.vehicle.speed))
+            if float(u.vehicle.speed) < STANDING_SPEED_MPS:
+                standing_steps += 1
+            monitor.observe(u, steps * period)
+            crashed = bool(u.vehicle.crashed)
+            if crashed and crash is None:
+                crash = crash_other(u, crashed_before)
+            arrived = spec["arrived"](u)
+            if verbose and name == "concord":
+                print(f"  seed {seed} t={steps * period:5.2f} pos=({u.vehicle.position[0]:6.1f},"
+                      f"{u.vehicle.position[1]:6.1f}) v={u.vehicle.speed:4.1f} {m} "
+                      f"{wire.SOURCES[d.source]}", file=sys.stderr)
+            if terminated or truncated or (limit is not None and steps * period >= limit - 1e-9):
                 break
-            decisions += 1
-            if wire.SOURCES[d.source] == "minimum_risk":
-                min_risk += 1
-            m = wire.MANEUVERS[d.maneuver]
-            maneuvers[m] = maneuvers.get(m, 0) + 1
-        else:
-            action = discrete
-        imposed.t = steps * period
-        crashed_before = [v for v in u.road.vehicles if v.crashed]
-        with imposed.attached(u), PetTracker.recording():
-            obs, _, terminated, truncated, info = env.step(action)
-        steps += 1
-        speeds.append(float(u.vehicle.speed))
-        if float(u.vehicle.speed) < STANDING_SPEED_MPS:
-            standing_steps += 1
-        monitor.observe(u, steps * period)
-        crashed = bool(u.vehicle.crashed)
-        if crashed and crash is None:
-            crash = crash_other(u, crashed_before)
-        arrived = spec["arrived"](u)
-        if verbose and name == "concord":
-            print(f"  seed {seed} t={steps * period:5.2f} pos=({u.vehicle.position[0]:6.1f},"
-                  f"{u.vehicle.position[1]:6.1f}) v={u.vehicle.speed:4.1f} {m} "
-                  f"{wire.SOURCES[d.source]}", file=sys.stderr)
-        if terminated or truncated or (limit is not None and steps * period >= limit - 1e-9):
-            break
     e = {
         "seed": seed,
         "steps": steps,

@@ -400,6 +400,17 @@ def _standing_ego(hb):
     return env, u
 
 
+def _episode(**fields):
+    """An episode record for ``summarize``: one step, arrived, nothing measured, ``fields``
+    overriding."""
+    e = {"crashed": False, "arrived": True, "timed_out": False, "steps": 1, "speed_sum": 0.0,
+         "decisions": 1, "minimum_risk": 0, "standing_s": 0.0, "others_max_decel_mps2": 0.0,
+         "imposed_decel_mps2": 0.0, "imposed_whole_decel_mps2": 0.0, "min_distance_m": 2.0,
+         "outcome": "arrived"}
+    e.update(fields)
+    return e
+
+
 class Reversing(unittest.TestCase):
     """A collision with a car that drives backwards is told apart: the crashed car's speed
     along its heading is negative, and the summary counts it."""
@@ -428,10 +439,7 @@ class Reversing(unittest.TestCase):
             self.assertTrue(hb.crash_other(u, [back])[1])
         finally:
             env.close()
-        e = {"crashed": True, "arrived": False, "timed_out": False, "steps": 1, "speed_sum": 0.0,
-             "decisions": 1, "minimum_risk": 0, "standing_s": 0.0, "others_max_decel_mps2": 0.0,
-             "imposed_decel_mps2": 0.0, "imposed_whole_decel_mps2": 0.0, "min_distance_m": 2.0,
-             "outcome": "crash"}
+        e = _episode(crashed=True, arrived=False, outcome="crash")
         episodes = [dict(e, crash_other_speed_mps=v, crash_other_had_crashed=c)
                     for v, c in ((-3.0, False), (2.0, True), (3.0, False), (None, None))]
         s = hb.summarize("intersection-v0", "concord", episodes)
@@ -577,11 +585,7 @@ class Pet(unittest.TestCase):
         sys.path.insert(0, HERE)
         import highway_bridge as hb
 
-        e = {"crashed": False, "arrived": True, "timed_out": False, "steps": 1, "speed_sum": 0.0,
-             "decisions": 1, "minimum_risk": 0, "standing_s": 0.0, "others_max_decel_mps2": 0.0,
-             "imposed_decel_mps2": 0.0, "imposed_whole_decel_mps2": 0.0, "min_distance_m": 2.0,
-             "outcome": "arrived"}
-        episodes = [dict(e, min_pet_s=p) for p in (0.2, 0.7, 1.2, 2.0, None)]
+        episodes = [_episode(min_pet_s=p) for p in (0.2, 0.7, 1.2, 2.0, None)]
         p = hb.summarize("intersection-v0", "concord", episodes)["pet_s"]
         self.assertEqual(p["episodes"], 4)
         self.assertEqual(p["min"], 0.2)
