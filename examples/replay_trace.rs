@@ -9,10 +9,11 @@
 //! Carlo run, so they can differ from the decision's in which candidates were drawn.
 
 use concord_core::choice::{self, Maneuver, MANEUVERS};
-use concord_core::scene::{AgentState, BuiltIn, Morphology, Scene, TurnSignal, Vec2};
+use concord_core::scene::{AgentState, Scene, TurnSignal, Vec2};
 use concord_core::trajectory::PlanStats;
 use concord_core::DecisionCore;
 use concord_ipc::core_service::RunConfig;
+use concord_map::BuiltIn;
 
 fn agent(v: &serde_json::Value) -> AgentState {
     let f = |k: usize| v[k].as_f64().unwrap();
@@ -49,7 +50,7 @@ fn main() {
         })
     };
     let (from, to) = (time(2, 0.0), time(3, f64::INFINITY));
-    let morph = Morphology::built_in(BuiltIn::HighwayEnvIntersection);
+    let morph = BuiltIn::HighwayEnvIntersection.morphology();
     if std::env::var_os("CONCORD_REPLAY_ZONES").is_some() {
         for c in morph.conflicts() {
             println!(

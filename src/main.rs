@@ -182,9 +182,15 @@ enum Command {
         /// Loop rate, Hz, overriding the file's.
         #[arg(long, value_parser = hertz)]
         rate: Option<f64>,
-        /// Road geometry, overriding the file's `service.geometry`.
-        #[arg(long, value_enum)]
+        /// Road geometry, a built-in map, overriding the file's `service.geometry`.
+        #[arg(long, value_enum, conflicts_with = "map")]
         geometry: Option<GeometryArg>,
+        /// Map file (TOML, see deploy/maps/README.md), overriding the file's `service.map`.
+        #[arg(long)]
+        map: Option<PathBuf>,
+        /// The ego's route: a lane id of the map, overriding the file's `service.route`.
+        #[arg(long)]
+        route: Option<String>,
         /// Stop after this many seconds (default: run until SIGINT/SIGTERM).
         #[arg(long, value_parser = seconds)]
         duration: Option<f64>,
@@ -232,6 +238,18 @@ enum Command {
         /// Stop after this many seconds.
         #[arg(long, value_parser = seconds)]
         duration: Option<f64>,
+    },
+    /// Load a map and print its lanes and the conflicts the core derives from them (what
+    /// `concord run --map FILE --route ID` would drive on).
+    Map {
+        /// Map file: Concord's TOML format (deploy/maps/README.md) or a SUMO network (*.net.xml).
+        file: PathBuf,
+        /// The ego's route (for a SUMO network it also selects the movements kept).
+        #[arg(long)]
+        route: Option<String>,
+        /// Print JSON (lanes with their vertices, conflicts) instead of tables.
+        #[arg(long)]
+        json: bool,
     },
     /// Print the default configuration as TOML, or check a configuration file.
     Params {
@@ -297,12 +315,18 @@ fn main() -> ExitCode {
             prefix,
             rate,
             geometry,
+            map,
+            route,
             duration,
         } => run(
             config.as_deref(),
             prefix,
             rate,
-            geometry.map(GeometryArg::geometry),
+            Road {
+                geometry: geometry.map(GeometryArg::geometry),
+                map,
+                route,
+            },
             duration,
             iox_path.as_deref(),
         ),
@@ -361,12 +385,13 @@ fn main() -> ExitCode {
             })
             .map(|_| ())
             .map_err(|e| e.to_string()),
+        Command::Map { file, route, json } => show_map(&file, route.as_deref(), json),
         Command::Params { check: None } => toml::to_string_pretty(&RunConfig::default())
             .map(|t| print!("{t}"))
             .map_err(|e| e.to_string()),
-        Command::Params { check: Some(path) } => {
-            load_config(Some(&path)).map(|_| println!("{}: ok", path.display()))
-        }
+        Command::Params { check: Some(path) } => load_config(Some(&path))
+            .and_then(|cfg| cfg.service.road())
+            .map(|_| println!("{}: ok", path.display())),
         Command::Sidecar {
             config,
             prefix,
@@ -494,24 +519,121 @@ fn default_iox_config() -> Option<PathBuf> {
         .or_else(|| Some(PathBuf::from("deploy/iceoryx2.toml")).filter(|p| p.exists()))
 }
 
-/// The configuration from `path` (or the defaults), validated.
+/// The configuration from `path` (or the defaults), validated. A relative `service.map` is
+/// taken relative to the file's directory.
 fn load_config(path: Option<&Path>) -> Result<RunConfig, String> {
     let cfg: RunConfig = match path {
         None => RunConfig::default(),
         Some(p) => {
             let text = std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?;
-            toml::from_str(&text).map_err(|e| format!("{}: {e}", p.display()))?
+            let mut cfg: RunConfig =
+                toml::from_str(&text).map_err(|e| format!("{}: {e}", p.display()))?;
+            if let (Some(map), Some(dir)) = (&cfg.service.map, p.parent()) {
+                cfg.service.map = Some(dir.join(map));
+            }
+            cfg
         }
     };
     cfg.validate()?;
     Ok(cfg)
 }
 
+/// `concord map`: the lanes of a map and the conflicts derived from them.
+fn show_map(file: &Path, route: Option<&str>, json: bool) -> Result<(), String> {
+    let (map, route_lane) = concord_map::Map::load_route(file, route).map_err(|e| e.to_string())?;
+    let morph = map.morphology();
+    let turn = |t: concord_core::scene::Turn| format!("{t:?}").to_lowercase();
+    if json {
+        let lanes: Vec<_> = morph
+            .lanes()
+            .iter()
+            .zip(map.ids())
+            .map(|(l, id)| {
+                serde_json::json!({
+                    "id": id, "turn": turn(l.turn), "priority": l.priority,
+                    "half_width_m": l.half_width, "stop_s_m": l.stop_s, "length_m": l.length(),
+                    "points": l.points().iter().map(|p| [p.x, p.y]).collect::<Vec<_>>(),
+                })
+            })
+            .collect();
+        let conflicts: Vec<_> = morph
+            .conflicts()
+            .iter()
+            .map(|c| {
+                serde_json::json!({
+                    "lane_a": c.lane_a, "lane_b": c.lane_b, "kind": format!("{:?}", c.kind),
+                    "right_of_way": format!("{:?}", c.right_of_way), "point": [c.pos.x, c.pos.y],
+                    "s_a_m": c.s_a, "s_b_m": c.s_b, "zone_a_m": c.zone_a, "zone_b_m": c.zone_b,
+                })
+            })
+            .collect();
+        let out = serde_json::json!({
+            "name": map.name, "route_lane": route_lane, "lanes": lanes, "conflicts": conflicts,
+        });
+        println!("{out}");
+        return Ok(());
+    }
+    println!(
+        "map {}: {} lanes, {} conflict points",
+        map.name,
+        map.ids().len(),
+        morph.conflicts().len()
+    );
+    println!("lane  id                      turn      level  width m  stop s m  length m");
+    for (i, (l, id)) in morph.lanes().iter().zip(map.ids()).enumerate() {
+        let mark = if route_lane == Some(i as u8) {
+            "*"
+        } else {
+            " "
+        };
+        println!(
+            "{mark}{i:<4} {id:<23} {:<9} {:>5}  {:>7.2}  {:>8.2}  {:>8.2}",
+            turn(l.turn),
+            l.priority,
+            2.0 * l.half_width,
+            l.stop_s,
+            l.length()
+        );
+    }
+    println!("lanes    kind      right of way  point (x, y) m     zone on a m       zone on b m");
+    for c in morph.conflicts() {
+        let who = match c.right_of_way {
+            concord_core::scene::RightOfWay::A => format!("lane {}", c.lane_a),
+            concord_core::scene::RightOfWay::B => format!("lane {}", c.lane_b),
+            concord_core::scene::RightOfWay::Neither => "neither".into(),
+        };
+        println!(
+            "{:>2} x {:<3} {:<9} {:<13} ({:>6.1}, {:>6.1})  [{:>6.1}, {:>6.1}]  [{:>6.1}, {:>6.1}]",
+            c.lane_a,
+            c.lane_b,
+            format!("{:?}", c.kind).to_lowercase(),
+            who,
+            c.pos.x,
+            c.pos.y,
+            c.zone_a[0],
+            c.zone_a[1],
+            c.zone_b[0],
+            c.zone_b[1]
+        );
+    }
+    if route.is_some() {
+        println!("* the route's lane");
+    }
+    Ok(())
+}
+
+/// The road options of `concord run`.
+struct Road {
+    geometry: Option<Geometry>,
+    map: Option<PathBuf>,
+    route: Option<String>,
+}
+
 fn run(
     config: Option<&Path>,
     prefix: Option<String>,
     rate: Option<f64>,
-    geometry: Option<Geometry>,
+    road: Road,
     duration: Option<f64>,
     iox_path: Option<&Path>,
 ) -> Result<(), String> {
@@ -522,29 +644,42 @@ fn run(
     if let Some(r) = rate {
         cfg.service.rate_hz = r;
     }
-    if let Some(g) = geometry {
+    if let Some(g) = road.geometry {
         cfg.service.geometry = g;
+        cfg.service.map = None;
+    }
+    if road.map.is_some() {
+        cfg.service.map = road.map;
+    }
+    if road.route.is_some() {
+        cfg.service.route = road.route;
     }
     cfg.validate()?;
+    let loaded = cfg.service.road()?;
     if let Some(note) = cfg.cover_advice_deadline() {
         eprintln!("concord run: {note}");
     }
     let iox_config = iox::init(iox_path).map_err(|e| e.to_string())?;
-    let mut core = Box::new(
-        DecisionCore::new(cfg.core, cfg.service.geometry.morphology())
-            .map_err(|e| e.to_string())?,
-    );
+    let mut core =
+        Box::new(DecisionCore::new(cfg.core, loaded.map.morphology()).map_err(|e| e.to_string())?);
+    let route = match (&cfg.service.route, loaded.route_lane) {
+        (Some(id), Some(lane)) => format!(", route {id} (lane {lane})"),
+        _ => String::new(),
+    };
     eprintln!(
-        "concord run: {} Hz on {}*, geometry {:?}, {} samples, staleness {} s",
+        "concord run: {} Hz on {}*, map {} ({} lanes, {} conflict points{route}), {} samples, staleness {} s",
         cfg.service.rate_hz,
         cfg.service.prefix,
-        cfg.service.geometry,
+        loaded.map.name,
+        loaded.map.ids().len(),
+        loaded.map.morphology().conflicts().len(),
         cfg.core.trajectory.samples,
         cfg.service.staleness_s
     );
     core_service::run(
         &mut core,
         &cfg.service,
+        loaded.route_lane,
         &cfg.realtime,
         &iox_config,
         StopAfter {

@@ -17,13 +17,14 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use concord_core::scene::{paper, AgentState, Scene, Vec2};
+use concord_core::scene::{AgentState, Scene, Vec2};
 use concord_core::{DecisionCore, Params};
 use concord_ipc::clock::now_ns;
 use concord_ipc::core_service::{self, Geometry, RunConfig, ServiceConfig, StopAfter};
 use concord_ipc::system::RealtimeConfig;
 use concord_ipc::wire::{FrameReject, IntentText, SceneFrame, TextSource, WireAdvice};
 use concord_ipc::{iox, services};
+use concord_map::paper;
 use concord_sidecar::config::SidecarConfig;
 use concord_sidecar::ledger::Ledger;
 use concord_sidecar::untrusted::{normalise, words};
@@ -290,6 +291,7 @@ fn a_running_core_counts_every_bad_frame_and_decides_the_good_ones_after() {
     let stats = core_service::run_observed(
         &mut core,
         &cfg,
+        None,
         &RealtimeConfig::default(),
         &config,
         StopAfter {

@@ -1,5 +1,7 @@
 //! `concord run --geometry` overrides the configuration file's `service.geometry`, and the file
-//! accepts every built-in geometry by its snake_case name.
+//! accepts every built-in geometry by its snake_case name; `--map` and `--route` load a map
+//! file and pick the ego's lane, and a bad map or route stops the start with an error naming
+//! it.
 
 use std::process::Command;
 
@@ -36,8 +38,11 @@ fn the_configuration_file_names_every_built_in_geometry() {
 #[test]
 fn run_takes_the_geometry_from_the_command_line() {
     for (arg, shown) in [
-        ("highway-env-intersection", "HighwayEnvIntersection"),
-        ("highway-env-merge", "HighwayEnvMerge"),
+        (
+            "highway-env-intersection",
+            "highway-env-intersection (10 lanes",
+        ),
+        ("highway-env-merge", "highway-env-merge (3 lanes"),
     ] {
         let prefix = format!("geometry-{}-{arg}/", std::process::id());
         let out = Command::new(CONCORD)
@@ -55,11 +60,88 @@ fn run_takes_the_geometry_from_the_command_line() {
             .expect("concord run starts");
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(out.status.success(), "{err}");
-        assert!(err.contains(&format!("geometry {shown}")), "{err}");
+        assert!(err.contains(&format!("map {shown}")), "{err}");
     }
     let bad = Command::new(CONCORD)
         .args(["run", "--geometry", "roundabout", "--duration", "0.1"])
         .output()
         .expect("concord runs");
     assert!(!bad.status.success());
+}
+
+fn maps_dir() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("deploy/maps")
+}
+
+#[test]
+fn run_loads_a_map_file_and_a_route() {
+    let prefix = format!("map-{}/", std::process::id());
+    let out = Command::new(CONCORD)
+        .args([
+            "run",
+            "--prefix",
+            &prefix,
+            "--rate",
+            "50",
+            "--duration",
+            "0.3",
+        ])
+        .arg("--map")
+        .arg(maps_dir().join("paper.toml"))
+        .args(["--route", "cav_left"])
+        .output()
+        .expect("concord run starts");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("map paper (8 lanes, 15 conflict points, route cav_left (lane 0))"),
+        "{err}"
+    );
+    for (args, expected) in [
+        (vec!["--route", "nowhere"], "no lane \"nowhere\""),
+        (
+            vec!["--map", "/nonexistent/map.toml"],
+            "cannot read map /nonexistent/map.toml",
+        ),
+    ] {
+        let mut cmd = Command::new(CONCORD);
+        cmd.args(["run", "--duration", "0.1"]).args(&args);
+        if args[0] == "--route" {
+            cmd.arg("--map").arg(maps_dir().join("merge.toml"));
+        }
+        let out = cmd.output().expect("concord runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?}");
+        assert!(err.contains(expected), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn a_configuration_file_names_its_map_relative_to_itself() {
+    let dir = std::env::temp_dir().join(format!("concord-map-config-{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("maps")).unwrap();
+    std::fs::copy(maps_dir().join("merge.toml"), dir.join("maps/m.toml")).unwrap();
+    let check = |route: &str| {
+        let path = dir.join("concord.toml");
+        std::fs::write(
+            &path,
+            format!("[service]\nmap = \"maps/m.toml\"\nroute = \"{route}\"\n"),
+        )
+        .unwrap();
+        Command::new(CONCORD)
+            .args(["params", "--check"])
+            .arg(&path)
+            .output()
+            .expect("concord params runs")
+    };
+    let good = check("ramp");
+    let bad = check("shoulder");
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(
+        good.status.success(),
+        "{}",
+        String::from_utf8_lossy(&good.stderr)
+    );
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("no lane \"shoulder\""));
 }

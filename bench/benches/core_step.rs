@@ -2,8 +2,9 @@
 //! trajectory stage alone (per candidate).
 
 use concord_bench::{core, Traffic};
-use concord_core::scene::{paper, AgentState, BuiltIn, Morphology, Scene, Vec2};
+use concord_core::scene::{AgentState, Scene, Vec2};
 use concord_core::{DecisionCore, Maneuver, Params};
+use concord_map::{paper, BuiltIn};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::hint::black_box;
 
@@ -83,7 +84,7 @@ fn like_for_like(c: &mut Criterion) {
     params.trajectory.max_duration_s = 4.8;
     params.trajectory.sigma_rel = 0.3;
     params.trajectory.sigma_lateral_m = 0.4;
-    let morph = Morphology::built_in(BuiltIn::PaperIntersection);
+    let morph = BuiltIn::PaperIntersection.morphology();
     let mut core = Box::new(DecisionCore::new(params, morph).expect("valid parameters"));
     let ego = AgentState::moving(0, Vec2::new(25.0, 5.0), core::f64::consts::PI, 5.0);
     let mut scene = Scene::new(0.0, ego, paper::CAV_LEFT);

@@ -1,14 +1,14 @@
 //! Workloads shared by the criterion benches and the latency report.
 
-use concord_core::scene::{paper, AgentState, BuiltIn, Morphology, Scene, Vec2, MAX_AGENTS};
+use concord_core::scene::{AgentState, Scene, Vec2, MAX_AGENTS};
 use concord_core::{Decision, DecisionCore, Params};
+use concord_map::{paper, BuiltIn};
 
 /// A core on the paper's intersection with `samples` Monte Carlo samples.
 pub fn core(samples: usize) -> DecisionCore {
     let mut params = Params::default();
     params.trajectory.samples = samples;
-    DecisionCore::new(params, Morphology::built_in(BuiltIn::PaperIntersection))
-        .expect("valid parameters")
+    DecisionCore::new(params, BuiltIn::PaperIntersection.morphology()).expect("valid parameters")
 }
 
 /// Lanes of the approaches other than the ego's.

@@ -9,11 +9,16 @@ does not matter which side starts first.
 """
 
 import ctypes
+import math
+import os
+import subprocess
 import time
 
 import iceoryx2 as iox2
 
 import concord_wire as wire
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 # Service settings shared with ipc/src/iox.rs.
 MAX_PUBLISHERS = 4
@@ -86,10 +91,76 @@ class ConcordLink:
 
 def agent(x, y, heading, speed, agent_id, kind=0):
     """A valid wire agent moving at ``speed`` along ``heading`` with no known intent."""
-    import math
     a = wire.WireAgent()
     a.x, a.y, a.heading = x, y, heading
     a.vx, a.vy = speed * math.cos(heading), speed * math.sin(heading)
     a.intent = wire.WireIntent.unknown()
     a.id, a.kind, a.valid = agent_id, kind, 1
     return a
+
+
+def sample(decision, t):
+    """(x, y, heading, speed) of the decision's trajectory ``t`` s ahead (linear in between)."""
+    n = decision.n_points
+    pts = decision.trajectory
+    if n == 0:
+        return None
+    if t <= pts[0].t:
+        p = pts[0]
+        return p.x, p.y, p.heading, p.speed
+    for k in range(1, n):
+        if pts[k].t >= t:
+            a, b = pts[k - 1], pts[k]
+            u = (t - a.t) / max(b.t - a.t, 1e-9)
+            turn = (b.heading - a.heading + math.pi) % (2.0 * math.pi) - math.pi
+            return (a.x + (b.x - a.x) * u, a.y + (b.y - a.y) * u, a.heading + turn * u,
+                    a.speed + (b.speed - a.speed) * u)
+    p = pts[n - 1]
+    return p.x, p.y, p.heading, p.speed
+
+
+class ConcordProcess:
+    """``concord run`` on a private prefix with ``road`` arguments (``["--geometry", name]`` or
+    ``["--map", file, "--route", id]``), and the link to it. The process is stopped by
+    ``close``."""
+
+    started = 0
+
+    def __init__(self, binary, road, rate, config=None, log=None, trace=False, tag="py"):
+        ConcordProcess.started += 1
+        self.prefix = f"{tag}-{os.getpid()}-{ConcordProcess.started}/"
+        args = [binary, "run", "--prefix", self.prefix, *road, "--rate", str(rate)]
+        if config:
+            args += ["--config", config]
+        self.log = open(log, "a", encoding="utf-8") if log else subprocess.DEVNULL
+        self.proc = subprocess.Popen(args, cwd=ROOT, stderr=self.log, stdout=self.log)
+        self.link = ConcordLink(prefix=self.prefix,
+                                node_name=f"{tag}-bridge-{os.getpid()}-{ConcordProcess.started}")
+        # The advice requests carry the OPM triplet of each decision: conflicts, selected
+        # objects, P_n; a trace logs them.
+        self.requests = None
+        if trace:
+            self.requests = (_service(self.link.node, wire.service_name("advice_request", self.prefix),
+                                      wire.AdviceRequest)
+                             .subscriber_builder().buffer_size(64).create())
+        deadline = time.monotonic() + 30
+        while self.link.latest_stats() is None:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"concord run exited with {self.proc.returncode}")
+            if time.monotonic() > deadline:
+                self.close()
+                raise RuntimeError("concord run never published statistics")
+            time.sleep(0.05)
+
+    def close(self):
+        self.requests = None
+        self.link = None  # releases the iceoryx2 node and its ports
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        if self.log is not subprocess.DEVNULL:
+            self.log.close()

@@ -53,7 +53,7 @@ merge-v0. The ego spawns at x = 30 on the right-hand lane (y = 4) of a two-lane 
 one car comes down the on-ramp and changes into the ego's lane on the auxiliary lane from
 x = 230, and the traffic around the ego, spawned at 28–32.5 m/s, slows to the lanes' 20 m/s
 speed limit. The core's ``highway-env-merge`` geometry models the ramp as a lane that tapers
-into the ego's lane at x = 250 (core/src/scene.rs, ``highway_env_merge``); the core only
+into the ego's lane at x = 250 (``deploy/maps/highway-env-merge.toml``); the core only
 decides along its lane, so the ego never changes lanes (it steers along the planned
 trajectory, as in the intersection). merge-v0 ends an episode on a collision or once the ego
 passes x = 370 and has no time limit of its own, so an episode counts as *arrived* when the ego
@@ -155,7 +155,6 @@ import contextlib
 import json
 import math
 import os
-import subprocess
 import sys
 import time
 
@@ -166,9 +165,11 @@ ROOT = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, HERE)
 
 import concord_wire as wire  # noqa: E402
+from concord_link import ConcordProcess, sample  # noqa: E402
+from pet import PetGrid, wrap  # noqa: E402
 
-# Lane indices of the core's BuiltIn::HighwayEnvIntersection and BuiltIn::HighwayEnvMerge
-# (core/src/scene.rs).
+# Lane indices of the maps deploy/maps/highway-env-intersection.toml and
+# deploy/maps/highway-env-merge.toml (concord_map::highway_env_intersection, ::highway_env_merge).
 HWI_EGO_LEFT = 0
 HWM_EGO_RIGHT = 0
 # merge-v0 ends the episode once the ego passes this x (MergeEnv._is_terminated).
@@ -341,10 +342,6 @@ def env_config(policy, policy_frequency, spec=None):
     return cfg
 
 
-def wrap(angle):
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
-
-
 class Tracker:
     """Stable ids for observed vehicles: each track is predicted one period ahead at constant
     velocity and greedily matched to the nearest detection within a gate."""
@@ -427,26 +424,6 @@ def wire_agent(x, y, vx, vy, heading, agent_id, ax=0.0, ay=0.0, signal=SIGNAL_OF
     return a
 
 
-def sample(decision, t):
-    """(x, y, heading, speed) of the decision's trajectory ``t`` s ahead (linear in between)."""
-    n = decision.n_points
-    pts = decision.trajectory
-    if n == 0:
-        return None
-    if t <= pts[0].t:
-        p = pts[0]
-        return p.x, p.y, p.heading, p.speed
-    for k in range(1, n):
-        if pts[k].t >= t:
-            a, b = pts[k - 1], pts[k]
-            u = (t - a.t) / max(b.t - a.t, 1e-9)
-            turn = wrap(b.heading - a.heading)
-            return (a.x + (b.x - a.x) * u, a.y + (b.y - a.y) * u, a.heading + turn * u,
-                    a.speed + (b.speed - a.speed) * u)
-    p = pts[n - 1]
-    return p.x, p.y, p.heading, p.speed
-
-
 def follow(decision, x, y, heading, speed, period, lookahead):
     """Acceleration (m/s²) and steering (rad) that follow ``decision`` for one ``period``."""
     start, target = sample(decision, 0.0), sample(decision, period)
@@ -496,60 +473,12 @@ def to_unit(value, lo, hi):
     return float(np.clip(2.0 * (value - lo) / (hi - lo) - 1.0, -1.0, 1.0))
 
 
-class ConcordProcess:
-    """``concord run`` on a private prefix, and the link to it."""
-
-    started = 0
-
-    def __init__(self, binary, geometry, rate, config=None, log=None, trace=False):
-        from concord_link import ConcordLink, _service
-
-        ConcordProcess.started += 1
-        self.prefix = f"hw-{os.getpid()}-{ConcordProcess.started}/"
-        args = [binary, "run", "--prefix", self.prefix, "--geometry", geometry,
-                "--rate", str(rate)]
-        if config:
-            args += ["--config", config]
-        self.log = open(log, "a", encoding="utf-8") if log else subprocess.DEVNULL
-        self.proc = subprocess.Popen(args, cwd=ROOT, stderr=self.log, stdout=self.log)
-        self.link = ConcordLink(prefix=self.prefix,
-                                node_name=f"highway-bridge-{os.getpid()}-{ConcordProcess.started}")
-        # The advice requests carry the OPM triplet of each decision: conflicts, selected
-        # objects, P_n; --trace logs them.
-        self.requests = None
-        if trace:
-            self.requests = (_service(self.link.node, wire.service_name("advice_request", self.prefix),
-                                      wire.AdviceRequest)
-                             .subscriber_builder().buffer_size(64).create())
-        deadline = time.monotonic() + 30
-        while self.link.latest_stats() is None:
-            if self.proc.poll() is not None:
-                raise RuntimeError(f"concord run exited with {self.proc.returncode}")
-            if time.monotonic() > deadline:
-                self.close()
-                raise RuntimeError("concord run never published statistics")
-            time.sleep(0.05)
-
-    def close(self):
-        self.requests = None
-        self.link = None  # releases the iceoryx2 node and its ports
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        if self.log is not subprocess.DEVNULL:
-            self.log.close()
-
-
 class ConcordPolicy:
     """One decision per environment step, in lock-step."""
 
     def __init__(self, args, spec, period):
-        self.core_args = (args.concord, spec["geometry"], args.rate, args.config,
-                          args.core_log, bool(args.trace))
+        self.core_args = (args.concord, ["--geometry", spec["geometry"]], args.rate,
+                          args.config, args.core_log, bool(args.trace), "hw")
         self.restart = not args.keep_core
         self.core = ConcordProcess(*self.core_args)
         self.trace = open(args.trace, "w", encoding="utf-8") if args.trace else None
@@ -814,82 +743,28 @@ class ImposedBraking:
             self.max_whole = max(self.max_whole, -with_ego)
 
 
-# Cell size of the PET grid, m, and the least heading difference of an encroachment (below
-# it two vehicles follow each other, which is a headway, not a post-encroachment time).
-PET_CELL_M = 0.5
-PET_MIN_ANGLE_RAD = math.radians(30.0)
-# Sample points of a vehicle's footprint in its own frame (PET_CELL_M apart, edges included).
-_FOOTPRINT = np.array([(x, y)
-                       for x in np.linspace(-VEHICLE_LENGTH / 2, VEHICLE_LENGTH / 2, 11)
-                       for y in np.linspace(-VEHICLE_WIDTH / 2, VEHICLE_WIDTH / 2, 5)])
-
-
-def footprint_cells(position, heading):
-    """The PET grid cells (ix, iy) a 5 m x 2 m vehicle at ``position`` and ``heading`` covers."""
-    c, s = math.cos(heading), math.sin(heading)
-    pts = _FOOTPRINT @ np.array([[c, s], [-s, c]]) + np.asarray(position, dtype=float)
-    return set(map(tuple, np.floor(pts / PET_CELL_M).astype(int).tolist()))
-
-
-class PetTracker:
-    """Post-encroachment time (PET) between the ego and every other vehicle, at the
-    simulation's frame rate (15 Hz in the intersection: 1/15 s resolution).
-
-    The plane is cut into ``PET_CELL_M`` cells; each frame, each vehicle's footprint covers a
-    set of them. When one vehicle enters a cell that the other (ego against any other vehicle)
-    has occupied before, with headings more than ``PET_MIN_ANGLE_RAD`` apart (a crossing or a
-    merge, not a car following another in its lane), the time since the other was last in that
-    cell is a PET: 0 when both are in it at once. ``min_pet`` is the smallest over the episode
-    (inf: no encroachment), ``min_pet_t`` when it happened. Attached to the road
-    (``road.pet_tracker``), it is copied with the environment (the oracle's branches)."""
+class PetTracker(PetGrid):
+    """Post-encroachment time between the ego and every other vehicle of a highway-env road
+    (``pet.PetGrid``), at the simulation's frame rate (15 Hz in the intersection: 1/15 s
+    resolution). Attached to the road (``road.pet_tracker``), it is copied with the
+    environment (the oracle's branches)."""
 
     def __init__(self, ego):
+        super().__init__()
         self.ego = ego
-        self.t = 0.0
         self.keys = 0
-        self.ego_cells = {}  # cell -> [last time, heading on entry]
-        self.other_cells = {}  # cell -> {vehicle key: [last time, heading on entry]}
-        self.min_pet = math.inf
-        self.min_pet_t = None
-
-    def _encroach(self, h, rec):
-        if abs(wrap(h - rec[1])) > PET_MIN_ANGLE_RAD:
-            pet = self.t - rec[0]
-            if pet < self.min_pet:
-                self.min_pet, self.min_pet_t = pet, self.t
 
     def observe(self, road, dt):
         """One frame of ``dt`` s has been simulated on ``road``."""
-        self.t += dt
-        t = self.t
-        entries = []
+        vehicles = []
         for v in road.vehicles:
             key = getattr(v, "pet_key", None)
             if key is None:
                 key = v.pet_key = self.keys
                 self.keys += 1
-            ego = v is self.ego
-            h = float(v.heading)
-            for cell in footprint_cells(v.position, h):
-                if ego:
-                    rec = self.ego_cells.get(cell)
-                else:
-                    rec = self.other_cells.setdefault(cell, {}).get(key)
-                if rec is None:
-                    entries.append((ego, key, cell, h))
-                else:
-                    rec[0] = t
-        # Entries last: a vehicle still in the cell has its time of this frame (PET 0).
-        for ego, key, cell, h in entries:
-            if ego:
-                for rec in self.other_cells.get(cell, {}).values():
-                    self._encroach(h, rec)
-                self.ego_cells[cell] = [t, h]
-            else:
-                rec = self.ego_cells.get(cell)
-                if rec is not None:
-                    self._encroach(h, rec)
-                self.other_cells[cell][key] = [t, h]
+            vehicles.append((key, v is self.ego, v.position, float(v.heading),
+                             VEHICLE_LENGTH, VEHICLE_WIDTH))
+        super().observe(dt, vehicles)
 
     @staticmethod
     @contextlib.contextmanager

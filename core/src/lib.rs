@@ -839,22 +839,36 @@ pub fn curve_speed_cap(lane: &Lane, s: f64, distance: f64, p: &params::Trajector
 #[cfg(test)]
 mod tests {
     use super::*;
-    use scene::{paper, AgentState, BuiltIn, Vec2};
+    use scene::{AgentState, Lane, Turn, Vec2};
+
+    /// The paper's left turn from (40, 5) and the straight lane it crosses (the map
+    /// `deploy/maps/paper.toml` has them as lanes 0 and 1).
+    fn left_turn_across_a_lane() -> Morphology {
+        let left = Lane::builder(Vec2::new(40.0, 5.0))
+            .line_to(Vec2::new(5.0, 5.0))
+            .arc(Vec2::new(5.0, -5.0), core::f64::consts::FRAC_PI_2, 1.0)
+            .line_to(Vec2::new(-5.0, -40.0))
+            .build(2.5, 30.0, Turn::Left)
+            .unwrap();
+        let straight = Lane::new(
+            &[Vec2::new(-40.0, -5.0), Vec2::new(40.0, -5.0)],
+            2.5,
+            30.0,
+            Turn::Straight,
+        )
+        .unwrap()
+        .with_priority(3);
+        Morphology::new(&[left, straight]).unwrap()
+    }
 
     /// A NaN that gets past validation (here: parameters set behind `validate`'s back) ends in
     /// the minimum-risk fallback with its own reason, never in the first maneuver.
     #[test]
     fn a_non_finite_choice_or_score_ends_in_the_minimum_risk_fallback() {
         let ego = AgentState::moving(0, Vec2::new(40.0, 5.0), core::f64::consts::PI, 8.0);
-        let mut scene = Scene::new(0.0, ego, paper::CAV_LEFT);
+        let mut scene = Scene::new(0.0, ego, 0);
         scene.push(AgentState::moving(1, Vec2::new(-40.0, -5.0), 0.0, 8.0));
-        let fresh = || {
-            DecisionCore::new(
-                Params::default(),
-                Morphology::built_in(BuiltIn::PaperIntersection),
-            )
-            .unwrap()
-        };
+        let fresh = || DecisionCore::new(Params::default(), left_turn_across_a_lane()).unwrap();
         let good = fresh().step(&scene, 0.0, None).unwrap();
         assert_eq!(good.fallback, FallbackReason::None);
         let breaks: [fn(&mut Params); 2] = [

@@ -8,12 +8,17 @@ use libm::{atan2, cos, hypot, sin, sqrt};
 
 /// Most agents one scene carries (besides the ego).
 pub const MAX_AGENTS: usize = 32;
-/// Most lane reference lines in one morphology.
-pub const MAX_LANES: usize = 12;
+/// Most lane reference lines in one morphology: the 12 movements of a four-way junction
+/// with one lane per approach, and room for more.
+pub const MAX_LANES: usize = 16;
 /// Most vertices of one lane reference polyline.
 pub const MAX_LANE_POINTS: usize = 64;
-/// Most lane-pair conflict points in one morphology.
-pub const MAX_CONFLICTS: usize = 32;
+/// Most lane-pair conflict points in one morphology (a four-way junction's 12 movements have
+/// about 30).
+pub const MAX_CONFLICTS: usize = 64;
+/// A lane's reference line extends this far back along its first segment for lane matching,
+/// m: queued traffic behind the start of a map's approach still belongs to it.
+pub const LANE_EXTENSION_M: f64 = 50.0;
 /// Extra lateral distance, m, at which lane matching counts a lane whose turn contradicts the
 /// agent's turn signal: where lanes overlap the signal decides, where they are apart the
 /// position does.
@@ -471,6 +476,8 @@ pub enum GeometryError {
     TooFewPoints,
     TooManyPoints,
     TooManyLanes,
+    /// More lane pairs cross or merge than [`MAX_CONFLICTS`].
+    TooManyConflicts,
     NotFinite,
     DuplicatePoint,
 }
@@ -689,6 +696,14 @@ impl LaneBuilder {
         }
         self
     }
+    /// Vertices so far.
+    pub fn points(&self) -> &[Vec2] {
+        &self.points[..self.n]
+    }
+    /// True when more than [`MAX_LANE_POINTS`] vertices were added (the rest were dropped).
+    pub fn overflowed(&self) -> bool {
+        self.overflow
+    }
     /// Finishes the lane.
     pub fn build(self, half_width: f64, stop_s: f64, turn: Turn) -> Result<Lane, GeometryError> {
         if self.overflow {
@@ -887,182 +902,6 @@ fn right_of_way(a: &Lane, s_a: f64, b: &Lane, s_b: f64, rule: JunctionRule) -> R
     }
 }
 
-/// Built-in geometries.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum BuiltIn {
-    /// The paper's unsignalised intersection (§6.1): centre at the origin, lanes at ±5 m.
-    PaperIntersection,
-    /// A single-lane on-ramp merging into a main lane (§6, Fig. 7).
-    Merge,
-    /// highway-env's `intersection-v0` (version 1.12.1) in its own coordinates: the ego's
-    /// unprotected left turn from the south approach and every lane that crosses or joins it.
-    /// See [`highway_env_intersection`].
-    HighwayEnvIntersection,
-    /// highway-env's `merge-v0` (version 1.12.1) in its own coordinates: the two-lane main
-    /// road the ego drives on and the on-ramp that joins its lane. See [`highway_env_merge`].
-    HighwayEnvMerge,
-}
-
-/// Lane indices of [`BuiltIn::PaperIntersection`].
-///
-/// Priority levels, as in highway-env's intersection: the east–west road is the major road
-/// (straight and right turns 3, left turns 2), the north–south road the minor one (straight 1);
-/// so the CAV's left turn gives way to the oncoming HDV and has the right of way over the
-/// minor road.
-pub mod paper {
-    /// Westbound from (40, 5), turning left to southbound: the CAV's route.
-    pub const CAV_LEFT: u8 = 0;
-    /// Eastbound straight from (−40, −5): the HDV's route.
-    pub const HDV_STRAIGHT: u8 = 1;
-    /// Westbound straight from (40, 5).
-    pub const WEST_STRAIGHT: u8 = 2;
-    /// Eastbound from (−40, −5), turning left to northbound.
-    pub const EAST_LEFT: u8 = 3;
-    /// Northbound straight from (5, −40).
-    pub const NORTH_STRAIGHT: u8 = 4;
-    /// Southbound straight from (−5, 40).
-    pub const SOUTH_STRAIGHT: u8 = 5;
-    /// Westbound from (40, 5), turning right to northbound.
-    pub const WEST_RIGHT: u8 = 6;
-    /// Eastbound from (−40, −5), turning right to southbound.
-    pub const EAST_RIGHT: u8 = 7;
-}
-
-/// Lane indices of [`BuiltIn::Merge`]; the main lane has priority level 1, the ramp 0.
-pub mod merge {
-    /// Main carriageway, eastbound along y = 0 from x = −150.
-    pub const MAIN: u8 = 0;
-    /// On-ramp from (−150, −12), joining the main lane at the origin: the CAV's route.
-    pub const RAMP: u8 = 1;
-}
-
-/// Lane indices and dimensions of [`BuiltIn::HighwayEnvIntersection`].
-///
-/// highway-env (1.12.1, `IntersectionEnv._make_road`) builds a four-way junction of 4 m lanes
-/// centred at the origin: each approach is 100 m long and ends 11 m from the centre, right
-/// turns have radius 9 m and left turns 13 m, and traffic keeps right as drawn on screen.
-/// The lanes here are in highway-env's own coordinates, so observations pass through
-/// unchanged: x to the east, y to the *south* (the renderer draws y downwards), headings
-/// `atan2(vy, vx)` in that frame. Since that frame is a mirror image of a counter-clockwise
-/// one, a turn that a driver makes to the left is a clockwise (negative) sweep in numbers;
-/// [`Turn`] labels are the driver's. Approaches are named by where they come from:
-/// highway-env's node suffixes 0 = south, 1 = west, 2 = north, 3 = east.
-///
-/// The ego enters from the south (`o0`, x = 2, driving towards −y) and turns left to the west
-/// exit (`il1 → o1`, y = −2, driving towards −x): the default `destination = "o1"`. Of the
-/// twelve movements, the six that cross or join that route are lanes here, plus the oncoming
-/// left turn (which passes the ego's turn without crossing it), so that an oncoming car in
-/// the middle of its turn is matched and predicted along its arc, and the right turns of the
-/// west and east approaches, so that a car signalling one is not taken for one that crosses.
-/// On an approach shared by several movements, an agent matches the movement its turn signal
-/// shows (see [`Morphology::match_lane`]); without a signal, the one with the lowest index,
-/// so straight movements come first.
-///
-/// Priority levels are highway-env's (`_make_road`, resolved by its `RegulatedRoad`): the
-/// east–west road 3 (its left turns 2), the north–south road 1 (its left turns 0), each
-/// movement at the level of its lane through the junction; at equal levels highway-env lets
-/// the car behind yield, i.e. first come first served ([`JunctionRule::Levels`]). The ego's
-/// left turn (0) gives way to every crossing movement.
-pub mod highway_env_intersection {
-    /// Lane width, m (`AbstractLane.DEFAULT_WIDTH`).
-    pub const LANE_WIDTH_M: f64 = 4.0;
-    /// Length of each approach lane, m.
-    pub const APPROACH_M: f64 = 100.0;
-    /// Distance from the centre to where approaches end and exits begin, m.
-    pub const OUTER_M: f64 = 11.0;
-    /// Radius of right turns, m.
-    pub const RIGHT_TURN_RADIUS_M: f64 = 9.0;
-    /// Radius of left turns, m.
-    pub const LEFT_TURN_RADIUS_M: f64 = 13.0;
-    /// Lateral offset of each lane centre from the road's axis, m.
-    pub const HALF_LANE_M: f64 = 2.0;
-
-    /// From the south (x = 2, towards −y), turning left to the west exit: the ego's route.
-    pub const EGO_LEFT: u8 = 0;
-    /// From the north (x = −2, towards +y), straight on: oncoming traffic; crosses the turn.
-    pub const NORTH_STRAIGHT: u8 = 1;
-    /// From the north, turning right into the west exit: joins the ego's exit lane.
-    pub const NORTH_RIGHT: u8 = 2;
-    /// From the north, turning left to the east exit: passes the ego's turn without crossing.
-    pub const NORTH_LEFT: u8 = 3;
-    /// From the west (y = 2, towards +x), straight on: priority road; crosses the turn.
-    pub const WEST_STRAIGHT: u8 = 4;
-    /// From the west, turning left to the north exit: crosses the turn.
-    pub const WEST_LEFT: u8 = 5;
-    /// From the east (y = −2, towards −x), straight on: priority road; joins the ego's exit.
-    pub const EAST_STRAIGHT: u8 = 6;
-    /// From the east, turning left to the south exit: crosses the turn.
-    pub const EAST_LEFT: u8 = 7;
-    /// From the west, turning right to the south exit: shares the west approach, then turns
-    /// away from the ego's route (concentric with its turn, 4 m inside it).
-    pub const WEST_RIGHT: u8 = 8;
-    /// From the east, turning right to the north exit: shares the east approach, then turns
-    /// away from the ego's route.
-    pub const EAST_RIGHT: u8 = 9;
-    /// Number of lanes.
-    pub const LANES: usize = 10;
-}
-
-/// Lane indices and dimensions of [`BuiltIn::HighwayEnvMerge`].
-///
-/// highway-env (1.12.1, `MergeEnv._make_road`) builds a straight two-lane road of 4 m lanes
-/// along +x from x = 0 to 460 (nodes a → b at 230 → c at 310 → d), lane centres at y = 0
-/// (lane index 0) and y = 4 (lane index 1), in its y-down frame, where y = 4 is the right-hand
-/// lane as a driver sees it. The on-ramp runs along y = 14.5 from x = 0 to 150 (j → k), then
-/// a sine section of amplitude 3.25 m over 80 m, y = 11.25 + 3.25 cos(π (x − 150) / 80), brings
-/// it to y = 8 at x = 230 (k → b), where an 80 m auxiliary lane beside the right-hand lane
-/// (b → c, lane index 2) ends at an obstacle at (310, 8). Ramp traffic changes into the
-/// right-hand lane anywhere on the auxiliary lane, in practice at its start: highway-env's
-/// IDM/MOBIL merging car starts its lane change at x ≈ 237 and is across by x ≈ 250 when the
-/// gap allows. The ego spawns on the right-hand lane at x = 30 at 30 m/s, and the episode
-/// ends when it passes x = 370.
-///
-/// The core's lanes cross or join rather than change, so the ramp here is one lane that
-/// follows highway-env's ramp to the start of the auxiliary lane and then tapers into the
-/// right-hand lane over [`TAPER_M`], as [`BuiltIn::Merge`]'s ramp does: the conflict point
-/// with the ego's lane is the end of the taper, (250, 4). The sine section is sampled as
-/// chords 5 m apart (they stay within 2 cm of the curve). A ramp car still waiting on the
-/// auxiliary lane beyond the taper matches no lane. On the joint part of the ramp and the
-/// ego's lane an agent matches the ego's lane (the lower index). The main lanes have priority
-/// level 1, the ramp 0 (highway-env's merging car changes lanes only into a gap).
-pub mod highway_env_merge {
-    /// Lane width, m (`AbstractLane.DEFAULT_WIDTH`).
-    pub const LANE_WIDTH_M: f64 = 4.0;
-    /// Where the main road ends, m (x of node d).
-    pub const ROAD_END_M: f64 = 460.0;
-    /// y of the left-hand main lane (highway-env lane index 0).
-    pub const LEFT_Y_M: f64 = 0.0;
-    /// y of the right-hand main lane (index 1), the ego's.
-    pub const RIGHT_Y_M: f64 = 4.0;
-    /// y of the ramp's straight approach (j → k).
-    pub const RAMP_Y_M: f64 = 14.5;
-    /// y of the auxiliary lane (b → c, index 2).
-    pub const AUX_Y_M: f64 = 8.0;
-    /// x where the ramp's sine section begins (node k).
-    pub const SINE_START_M: f64 = 150.0;
-    /// x where the sine section ends and the auxiliary lane begins (node b).
-    pub const AUX_START_M: f64 = 230.0;
-    /// x where the auxiliary lane ends at an obstacle (node c).
-    pub const AUX_END_M: f64 = 310.0;
-    /// Length along x of the core's taper from the auxiliary lane into the right-hand lane, m.
-    pub const TAPER_M: f64 = 20.0;
-    /// x where the ramp joins the ego's lane: the conflict point.
-    pub const JOIN_M: f64 = AUX_START_M + TAPER_M;
-    /// x beyond which highway-env ends the episode (`MergeEnv._is_terminated`).
-    pub const TERMINATION_X_M: f64 = 370.0;
-    /// Chord length along x of the sampled sine section, m.
-    pub const SINE_STEP_M: f64 = 5.0;
-
-    /// Right-hand main lane, y = 4 (highway-env `("a", "b", 1)` onwards): the ego's route.
-    pub const EGO_RIGHT: u8 = 0;
-    /// Left-hand main lane, y = 0 (`("a", "b", 0)` onwards); parallel, no conflict.
-    pub const MAIN_LEFT: u8 = 1;
-    /// On-ramp (`j → k → b`), tapering into the ego's lane from the auxiliary lane.
-    pub const RAMP: u8 = 2;
-    /// Number of lanes.
-    pub const LANES: usize = 3;
-}
-
 /// Intersection morphology 𝓘 = {P_stop, R_lane, L_ref} (eq. 2) with its conflict points,
 /// their zones and right of way.
 #[derive(Clone, Copy, Debug)]
@@ -1107,7 +946,7 @@ impl Morphology {
                 }
                 if let Some((s_a, s_b, pos)) = first_contact(&lanes[a], &lanes[b]) {
                     if m.n_conflicts == MAX_CONFLICTS {
-                        return Err(GeometryError::TooManyLanes);
+                        return Err(GeometryError::TooManyConflicts);
                     }
                     m.conflicts[m.n_conflicts] = ConflictPoint {
                         lane_a: a as u8,
@@ -1157,15 +996,28 @@ impl Morphology {
         }
     }
 
-    /// One of the built-in geometries.
-    pub fn built_in(which: BuiltIn) -> Self {
-        match which {
-            BuiltIn::PaperIntersection => Morphology::new(&paper_lanes()),
-            BuiltIn::Merge => Morphology::new(&[merge_main(), merge_ramp()]),
-            BuiltIn::HighwayEnvIntersection => Morphology::new(&highway_env_intersection_lanes()),
-            BuiltIn::HighwayEnvMerge => Morphology::new(&highway_env_merge_lanes()),
+    /// Sets the right of way at the conflict point of lanes `a` and `b` (`A` is lane `a`), as
+    /// a map with pairwise rules (SUMO's junction requests) gives it; false when the lanes
+    /// have no conflict point.
+    pub fn set_right_of_way(&mut self, a: u8, b: u8, right_of_way: RightOfWay) -> bool {
+        match self.conflicts[..self.n_conflicts]
+            .iter_mut()
+            .find(|c| (c.lane_a, c.lane_b) == (a, b) || (c.lane_a, c.lane_b) == (b, a))
+        {
+            Some(c) => {
+                c.right_of_way = if c.lane_a == a {
+                    right_of_way
+                } else {
+                    match right_of_way {
+                        RightOfWay::A => RightOfWay::B,
+                        RightOfWay::B => RightOfWay::A,
+                        RightOfWay::Neither => RightOfWay::Neither,
+                    }
+                };
+                true
+            }
+            None => false,
         }
-        .expect("built-in geometries are valid")
     }
 
     /// How equal priority levels are resolved.
@@ -1209,7 +1061,8 @@ impl Morphology {
             .map(move |c| c.seen_from(lane).zone_a)
     }
 
-    /// Lane that best explains an agent's pose: within the lane boundary and heading within
+    /// Lane that best explains an agent's pose: within the lane boundary (from
+    /// [`LANE_EXTENSION_M`] before its first vertex to its end) and heading within
     /// `max_heading_err` rad of the tangent; the smallest |l| wins, and a lane whose turn
     /// contradicts a left or right `signal` counts as [`SIGNAL_MISMATCH_M`] further away (lanes
     /// of one approach overlap until they diverge, so there the signal decides; without a
@@ -1230,7 +1083,7 @@ impl Morphology {
         for (i, lane) in self.lanes().iter().enumerate() {
             let f = lane.project(pos);
             if f.l.abs() > lane.half_width
-                || f.s < -lane.half_width
+                || f.s < -LANE_EXTENSION_M
                 || f.s > lane.length() + lane.half_width
             {
                 continue;
@@ -1280,234 +1133,6 @@ fn first_contact(a: &Lane, b: &Lane) -> Option<(f64, f64, Vec2)> {
         }
     }
     None
-}
-
-const ARC_STEP_M: f64 = 1.0;
-const PAPER_HALF_WIDTH_M: f64 = 2.5;
-
-fn paper_lanes() -> [Lane; 8] {
-    use core::f64::consts::FRAC_PI_2;
-    let v = Vec2::new;
-    let hw = PAPER_HALF_WIDTH_M;
-    // Approaches run 40 m to the junction box |x|, |y| ≤ 10; stop lines at its edge (s = 30).
-    let lane = |b: LaneBuilder, turn, level| {
-        b.build(hw, 30.0, turn)
-            .expect("valid built-in lane")
-            .with_priority(level)
-    };
-    [
-        lane(
-            Lane::builder(v(40.0, 5.0))
-                .line_to(v(5.0, 5.0))
-                .arc(v(5.0, -5.0), FRAC_PI_2, ARC_STEP_M)
-                .line_to(v(-5.0, -40.0)),
-            Turn::Left,
-            2,
-        ),
-        lane(
-            Lane::builder(v(-40.0, -5.0)).line_to(v(40.0, -5.0)),
-            Turn::Straight,
-            3,
-        ),
-        lane(
-            Lane::builder(v(40.0, 5.0)).line_to(v(-40.0, 5.0)),
-            Turn::Straight,
-            3,
-        ),
-        lane(
-            Lane::builder(v(-40.0, -5.0))
-                .line_to(v(-5.0, -5.0))
-                .arc(v(-5.0, 5.0), FRAC_PI_2, ARC_STEP_M)
-                .line_to(v(5.0, 40.0)),
-            Turn::Left,
-            2,
-        ),
-        lane(
-            Lane::builder(v(5.0, -40.0)).line_to(v(5.0, 40.0)),
-            Turn::Straight,
-            1,
-        ),
-        lane(
-            Lane::builder(v(-5.0, 40.0)).line_to(v(-5.0, -40.0)),
-            Turn::Straight,
-            1,
-        ),
-        lane(
-            Lane::builder(v(40.0, 5.0))
-                .line_to(v(10.0, 5.0))
-                .arc(v(10.0, 10.0), -FRAC_PI_2, ARC_STEP_M)
-                .line_to(v(5.0, 40.0)),
-            Turn::Right,
-            3,
-        ),
-        lane(
-            Lane::builder(v(-40.0, -5.0))
-                .line_to(v(-10.0, -5.0))
-                .arc(v(-10.0, -10.0), -FRAC_PI_2, ARC_STEP_M)
-                .line_to(v(-5.0, -40.0)),
-            Turn::Right,
-            3,
-        ),
-    ]
-}
-
-fn highway_env_intersection_lanes() -> [Lane; highway_env_intersection::LANES] {
-    use core::f64::consts::FRAC_PI_2;
-    use highway_env_intersection::*;
-    let v = Vec2::new;
-    let (h, o) = (HALF_LANE_M, OUTER_M);
-    let far = OUTER_M + APPROACH_M;
-    let (r_left, r_right) = (LEFT_TURN_RADIUS_M, RIGHT_TURN_RADIUS_M);
-    // Left-turn centres sit on the far side of the crossing road, right-turn centres at the
-    // near corner: (±(r − 2), ±(r − 2)) = (±11, ±11) for both radii.
-    let (cl, cr) = (r_left - h, r_right + h);
-    // Stop lines where the approaches end (highway-env has none; its junction begins there).
-    let lane = |b: LaneBuilder, turn, level| {
-        b.build(0.5 * LANE_WIDTH_M, APPROACH_M, turn)
-            .expect("valid built-in lane")
-            .with_priority(level)
-    };
-    // A driver's left turn is a clockwise (negative) sweep in highway-env's y-down frame.
-    let left = -FRAC_PI_2;
-    let right = FRAC_PI_2;
-    [
-        // EGO_LEFT: o0 → ir0 → il1 → o1.
-        lane(
-            Lane::builder(v(h, far))
-                .line_to(v(h, o))
-                .arc(v(-cl, cl), left, ARC_STEP_M)
-                .line_to(v(-far, -h)),
-            Turn::Left,
-            0,
-        ),
-        // NORTH_STRAIGHT: o2 → ir2 → il0 → o0.
-        lane(
-            Lane::builder(v(-h, -far)).line_to(v(-h, far)),
-            Turn::Straight,
-            1,
-        ),
-        // NORTH_RIGHT: o2 → ir2 → il1 → o1.
-        lane(
-            Lane::builder(v(-h, -far))
-                .line_to(v(-h, -o))
-                .arc(v(-cr, -cr), right, ARC_STEP_M)
-                .line_to(v(-far, -h)),
-            Turn::Right,
-            1,
-        ),
-        // NORTH_LEFT: o2 → ir2 → il3 → o3.
-        lane(
-            Lane::builder(v(-h, -far))
-                .line_to(v(-h, -o))
-                .arc(v(cl, -cl), left, ARC_STEP_M)
-                .line_to(v(far, h)),
-            Turn::Left,
-            0,
-        ),
-        // WEST_STRAIGHT: o1 → ir1 → il3 → o3.
-        lane(
-            Lane::builder(v(-far, h)).line_to(v(far, h)),
-            Turn::Straight,
-            3,
-        ),
-        // WEST_LEFT: o1 → ir1 → il2 → o2.
-        lane(
-            Lane::builder(v(-far, h))
-                .line_to(v(-o, h))
-                .arc(v(-cl, -cl), left, ARC_STEP_M)
-                .line_to(v(h, -far)),
-            Turn::Left,
-            2,
-        ),
-        // EAST_STRAIGHT: o3 → ir3 → il1 → o1.
-        lane(
-            Lane::builder(v(far, -h)).line_to(v(-far, -h)),
-            Turn::Straight,
-            3,
-        ),
-        // EAST_LEFT: o3 → ir3 → il0 → o0.
-        lane(
-            Lane::builder(v(far, -h))
-                .line_to(v(o, -h))
-                .arc(v(cl, cl), left, ARC_STEP_M)
-                .line_to(v(-h, far)),
-            Turn::Left,
-            2,
-        ),
-        // WEST_RIGHT: o1 → ir1 → il0 → o0.
-        lane(
-            Lane::builder(v(-far, h))
-                .line_to(v(-o, h))
-                .arc(v(-cr, cr), right, ARC_STEP_M)
-                .line_to(v(-h, far)),
-            Turn::Right,
-            3,
-        ),
-        // EAST_RIGHT: o3 → ir3 → il2 → o2.
-        lane(
-            Lane::builder(v(far, -h))
-                .line_to(v(o, -h))
-                .arc(v(cr, -cr), right, ARC_STEP_M)
-                .line_to(v(h, -far)),
-            Turn::Right,
-            3,
-        ),
-    ]
-}
-
-fn highway_env_merge_lanes() -> [Lane; highway_env_merge::LANES] {
-    use core::f64::consts::PI;
-    use highway_env_merge::*;
-    let v = Vec2::new;
-    let hw = 0.5 * LANE_WIDTH_M;
-    // Main lanes follow highway-env's nodes a → b → c → d. Their stop line is the join point
-    // (like BuiltIn::Merge's main lane).
-    let main = |y: f64| {
-        Lane::builder(v(0.0, y))
-            .line_to(v(AUX_START_M, y))
-            .line_to(v(AUX_END_M, y))
-            .line_to(v(ROAD_END_M, y))
-            .build(hw, JOIN_M, Turn::Straight)
-            .expect("valid built-in lane")
-            .with_priority(1)
-    };
-    let amplitude = 0.5 * (RAMP_Y_M - AUX_Y_M);
-    let centre = 0.5 * (RAMP_Y_M + AUX_Y_M);
-    let sine_len = AUX_START_M - SINE_START_M;
-    let mut ramp = Lane::builder(v(0.0, RAMP_Y_M)).line_to(v(SINE_START_M, RAMP_Y_M));
-    let chords = libm::ceil(sine_len / SINE_STEP_M) as usize;
-    for k in 1..=chords {
-        let x = SINE_START_M + sine_len * k as f64 / chords as f64;
-        let y = centre + amplitude * cos(PI * (x - SINE_START_M) / sine_len);
-        ramp = ramp.line_to(v(x, y));
-    }
-    let mut ramp = ramp
-        .line_to(v(JOIN_M, RIGHT_Y_M))
-        .line_to(v(ROAD_END_M, RIGHT_Y_M))
-        .build(hw, 0.0, Turn::Straight)
-        .expect("valid built-in lane")
-        .with_priority(0);
-    // The ramp's stop line is where its taper begins (the start of the auxiliary lane).
-    ramp.stop_s = ramp.project(v(AUX_START_M, AUX_Y_M)).s;
-    [main(RIGHT_Y_M), main(LEFT_Y_M), ramp]
-}
-
-fn merge_main() -> Lane {
-    Lane::builder(Vec2::new(-150.0, 0.0))
-        .line_to(Vec2::new(150.0, 0.0))
-        .build(1.8, 150.0, Turn::Straight)
-        .expect("valid built-in lane")
-        .with_priority(1)
-}
-
-fn merge_ramp() -> Lane {
-    // Ramp parallel to the main lane, then a 60 m taper that joins it at the origin.
-    Lane::builder(Vec2::new(-150.0, -12.0))
-        .line_to(Vec2::new(-60.0, -12.0))
-        .line_to(Vec2::new(0.0, 0.0))
-        .line_to(Vec2::new(150.0, 0.0))
-        .build(1.8, 90.0, Turn::Straight)
-        .expect("valid built-in lane")
 }
 
 /// Process state P_ti = (p, v, a, θ_v, θ_a, l) of one agent (eq. 3).

@@ -7,19 +7,18 @@ use concord_core::choice::{argmax, correct, cosine, idm_accel, ChoiceHistory, Ma
 use concord_core::opm::{delta_ttc, guarded_ttc};
 use concord_core::params::{AdviceParams, ChoiceParams, OpmParams, Params, TrajectoryParams};
 use concord_core::saliency::{attend, softmax, Saliency, FEATURES};
-use concord_core::scene::{
-    paper, AgentState, BuiltIn, Morphology, ProcessState, Turn, Vec2, MAX_AGENTS,
-};
+use concord_core::scene::{AgentState, Morphology, ProcessState, Turn, Vec2, MAX_AGENTS};
 use concord_core::trajectory::{
     travel, Forecast, FrenetState, Hit, Planner, Quartic, Quintic, Reject, Trajectory,
 };
 use concord_core::DecisionCore;
+use concord_map::{paper, BuiltIn};
 
 const EPS: f64 = 1e-9;
 
 #[test]
 fn eq2_paper_geometry_has_the_conflict_point_at_minus_five_minus_five() {
-    let m = Morphology::built_in(BuiltIn::PaperIntersection);
+    let m = BuiltIn::PaperIntersection.morphology();
     let (s_cav, s_hdv) = m
         .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
         .expect("the routes cross");
@@ -38,7 +37,7 @@ fn eq2_paper_geometry_has_the_conflict_point_at_minus_five_minus_five() {
 
 #[test]
 fn eq3_process_state_of_the_hdv() {
-    let m = Morphology::built_in(BuiltIn::PaperIntersection);
+    let m = BuiltIn::PaperIntersection.morphology();
     let hdv = AgentState::moving(1, Vec2::new(-40.0, -5.0), 0.0, 8.0);
     let p = ProcessState::of(&hdv, &m, 1.0);
     assert_eq!(p.lane, Some(paper::HDV_STRAIGHT));
@@ -52,7 +51,7 @@ fn eq3_process_state_of_the_hdv() {
 
 #[test]
 fn frenet_projection_round_trips_on_the_turn() {
-    let m = Morphology::built_in(BuiltIn::PaperIntersection);
+    let m = BuiltIn::PaperIntersection.morphology();
     let lane = m.lane(paper::CAV_LEFT);
     for s in [5.0, 36.0, 42.0, 49.0, 60.0] {
         for l in [-1.0, 0.0, 1.5] {
@@ -455,8 +454,7 @@ fn table2_score_of_a_constant_speed_candidate() {
     // S = c_e · (goal / v) / T_ref with the goal the reference distance (no conflict).
     let p = Params::default();
     let mut core =
-        concord_core::DecisionCore::new(p, Morphology::built_in(BuiltIn::PaperIntersection))
-            .unwrap();
+        concord_core::DecisionCore::new(p, BuiltIn::PaperIntersection.morphology()).unwrap();
     let ego = AgentState::moving(0, Vec2::new(40.0, 5.0), std::f64::consts::PI, 10.0);
     let scene = concord_core::Scene::new(0.0, ego, paper::WEST_STRAIGHT);
     core.step(&scene, 0.0, None).unwrap();
@@ -479,8 +477,7 @@ fn a_plan_started_with_lateral_velocity_stays_within_the_lateral_bound() {
     // that state overshoots any terminal offset unless its whole path is checked.
     let p = Params::default();
     let mut core =
-        concord_core::DecisionCore::new(p, Morphology::built_in(BuiltIn::PaperIntersection))
-            .unwrap();
+        concord_core::DecisionCore::new(p, BuiltIn::PaperIntersection.morphology()).unwrap();
     let course = std::f64::consts::PI - 0.15;
     let mut ego = AgentState::moving(0, Vec2::new(40.0, 5.0), course, 10.0);
     ego.heading = std::f64::consts::PI;
@@ -559,9 +556,9 @@ fn along(c: &concord_core::trajectory::Candidate, t: f64) -> (f64, f64) {
 fn decelerating_behind_a_car_that_will_have_passed_rolls_on_instead_of_stopping() {
     // The merge: the CAV 40 m before the join at 10 m/s, the main-lane car 5 m before it: it
     // is through long before the CAV arrives, so "decelerate" slows and merges behind it.
-    use concord_core::scene::merge;
+    use concord_map::merge;
     let p = Params::default();
-    let m = Morphology::built_in(BuiltIn::Merge);
+    let m = BuiltIn::Merge.morphology();
     let (s_main, s_ramp) = m.conflict_between(merge::MAIN, merge::RAMP).unwrap();
     let (cav, h_cav, _) = m.lane(merge::RAMP).pose_at(s_ramp - 40.0, 0);
     let (hdv, h_hdv, _) = m.lane(merge::MAIN).pose_at(s_main - 5.0, 0);
@@ -795,8 +792,8 @@ fn stale_scene_fallback_brakes_from_where_the_last_plan_puts_the_ego() {
 
 #[test]
 fn merge_geometry_conflicts_where_the_ramp_joins() {
-    use concord_core::scene::merge;
-    let m = Morphology::built_in(BuiltIn::Merge);
+    use concord_map::merge;
+    let m = BuiltIn::Merge.morphology();
     let (s_main, s_ramp) = m
         .conflict_between(merge::MAIN, merge::RAMP)
         .expect("the ramp joins the main lane");
@@ -1282,7 +1279,7 @@ fn through_the_turn_the_plan_keeps_the_lateral_acceleration_limit() {
 /// A planner on the paper's left-turn lane with `agents`, the ego `s` m along it at `v` m/s and
 /// `a` m/s².
 fn planner_with(agents: &[AgentState], s: f64, v: f64, a: f64) -> (Planner, Morphology) {
-    let morph = Morphology::built_in(BuiltIn::PaperIntersection);
+    let morph = BuiltIn::PaperIntersection.morphology();
     let start = FrenetState {
         s,
         ds: v,
@@ -1311,7 +1308,7 @@ fn prepared(morph: &Morphology, lane: u8, start: FrenetState, agents: &[AgentSta
 
 /// A road user on the centre line of the paper's left-turn lane, `s` m along it, at `v` m/s.
 fn car_on_the_turn(s: f64, v: f64) -> AgentState {
-    let morph = Morphology::built_in(BuiltIn::PaperIntersection);
+    let morph = BuiltIn::PaperIntersection.morphology();
     let (pos, heading, _) = morph.lane(paper::CAV_LEFT).pose_at(s, 0);
     AgentState::moving(1, pos, heading, v)
 }
@@ -1350,10 +1347,12 @@ fn a_footprint_overlapping_another_is_kept_and_a_point_in_it_is_a_contact() {
 /// A planner on highway-env's left turn with the ego standing at the end of its approach
 /// (x = 2, y = 11, heading −y), where the turn begins, and `agents` standing still.
 fn standing_at_the_turn(agents: &[AgentState]) -> Planner {
-    use concord_core::scene::highway_env_intersection::{APPROACH_M, EGO_LEFT};
-    let morph = Morphology::built_in(BuiltIn::HighwayEnvIntersection);
+    use concord_map::highway_env_intersection::EGO_LEFT;
+    let morph = BuiltIn::HighwayEnvIntersection.morphology();
+    // The approach ends at the stop line.
+    let approach_m = morph.lane(EGO_LEFT).stop_s;
     let start = FrenetState {
-        s: APPROACH_M,
+        s: approach_m,
         ..FrenetState::default()
     };
     prepared(&morph, EGO_LEFT, start, agents)
@@ -1391,11 +1390,13 @@ fn a_footprint_inside_another_footprints_box_still_blocks() {
     // The car beside the turn has a large box; a second car, 3 m to the left of the turn
     // 5.5 m into it, has its box inside that one. Where the ego would touch only the second
     // car, the point is a contact with both present: the covered box's rectangle is not lost.
-    use concord_core::scene::highway_env_intersection::{APPROACH_M, EGO_LEFT};
-    let morph = Morphology::built_in(BuiltIn::HighwayEnvIntersection);
+    use concord_map::highway_env_intersection::EGO_LEFT;
+    let morph = BuiltIn::HighwayEnvIntersection.morphology();
+    // The approach ends at the stop line.
+    let approach_m = morph.lane(EGO_LEFT).stop_s;
     let down = core::f64::consts::FRAC_PI_2;
     let beside = AgentState::moving(1, Vec2::new(-2.0, 7.0), down, 0.0);
-    let (s_b, l_b) = (APPROACH_M + 5.5, -3.0);
+    let (s_b, l_b) = (approach_m + 5.5, -3.0);
     let (pos, heading, _) = morph.lane(EGO_LEFT).to_cartesian(s_b, l_b, 0);
     let inside = AgentState::moving(2, pos, heading, 0.0);
     let (s, l) = (s_b - 4.0, l_b + 2.0);

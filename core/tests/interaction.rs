@@ -13,11 +13,12 @@ use concord_core::negotiation::{Negotiation, Phase};
 use concord_core::opm::{ConflictPair, ConflictSet, OpmTriplet};
 use concord_core::params::{ChoiceParams, InteractionParams, OpmParams, Params};
 use concord_core::scene::{
-    paper, AgentState, BuiltIn, ConflictKind, ExplicitIntent, History, IntentAction, Morphology,
-    ProcessState, Rated, RightOfWay, Vec2, MAX_AGENTS,
+    AgentState, ConflictKind, ExplicitIntent, History, IntentAction, Morphology, ProcessState,
+    Rated, RightOfWay, Vec2, MAX_AGENTS,
 };
 use concord_core::trajectory::{Forecast, FrenetState, Hit, Planner, Reject};
 use concord_core::{DecisionCore, Scene};
+use concord_map::{paper, BuiltIn};
 
 /// A conflict with the ego's and the other's passages at `ego` and `other` (distances from
 /// their centres, m) and the other at `v` m/s.
@@ -266,7 +267,7 @@ fn with_the_right_of_way_the_ego_counts_on_the_other_yielding_until_it_is_commit
 
 #[test]
 fn the_paper_junction_gives_the_hdv_priority_over_the_left_turn_and_the_turn_over_the_minor_road() {
-    let m = Morphology::built_in(BuiltIn::PaperIntersection);
+    let m = BuiltIn::PaperIntersection.morphology();
     let hdv = m.conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT).unwrap();
     assert_eq!(hdv.right_of_way, RightOfWay::B);
     let minor = m.conflict(paper::CAV_LEFT, paper::NORTH_STRAIGHT).unwrap();
@@ -480,7 +481,7 @@ fn no_candidate_ends_standing_inside_a_conflict_zone() {
 
 #[test]
 fn conflict_zones_come_from_the_footprint_and_the_lane_widths() {
-    let m = Morphology::built_in(BuiltIn::PaperIntersection);
+    let m = BuiltIn::PaperIntersection.morphology();
     let c = m.conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT).unwrap();
     assert_eq!(c.kind, ConflictKind::Crossing);
     // The HDV's lane is straight and the CAV's crosses it at a right angle: the HDV is in the
@@ -560,7 +561,7 @@ fn the_planner_keeps_the_margins_in_the_egos_passage_of_the_zone_only() {
     // The ego 10 m along its lane at 6 m/s; a car 20 m ahead of it in that lane at 4 m/s, in
     // its passage of a zone for the whole horizon; the ego's passage of that zone is 25–35 m
     // ahead. The margin boxes lie there, not along the car's whole path.
-    let morph = Morphology::built_in(BuiltIn::PaperIntersection);
+    let morph = BuiltIn::PaperIntersection.morphology();
     let p = Params::default().trajectory;
     let s0 = 10.0;
     let (pos, heading, _) = morph.lane(paper::CAV_LEFT).pose_at(s0 + 20.0, 0);
@@ -613,7 +614,7 @@ fn a_yielding_car_is_forecast_to_stop_so_the_ego_can_go_first() {
     let mut equal = Params::default();
     // Without the right of way (so its motion alone decides), a cruising car drives on.
     equal.interaction.trust_yield = 0.8;
-    let core = DecisionCore::new(equal, Morphology::built_in(BuiltIn::PaperIntersection));
+    let core = DecisionCore::new(equal, BuiltIn::PaperIntersection.morphology());
     let mut core = core.unwrap();
     let (_, scene) = priority_scene(8.0, 25.0, 8.0, 0.0);
     let mut s = scene;

@@ -7,10 +7,11 @@ use concord_core::choice::Maneuver;
 use concord_core::opm::{delta_ttc, guarded_ttc};
 use concord_core::params::{AdviceParams, OpmParams};
 use concord_core::scene::{
-    paper, AgentState, ExplicitIntent, IntentAction, Rated, Style, Task, Turn, Vec2,
+    AgentState, ExplicitIntent, IntentAction, Rated, Style, Task, Turn, Vec2,
 };
 use concord_core::trajectory::{predict, Quartic, Quintic};
 use concord_core::{DecisionSource, Params, Scene};
+use concord_map::paper;
 use proptest::prelude::*;
 
 /// (lane, s along it, speed, longitudinal accel, intent confidence)

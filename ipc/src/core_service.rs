@@ -12,11 +12,13 @@
 
 use std::fmt::Write as _;
 use std::io::Write as _;
+use std::path::PathBuf;
 use std::time::Duration;
 
 use concord_core::negotiation::Phase;
 use concord_core::scene::{Scene, SceneErrorKind};
 use concord_core::{Advice, AdviceVerdict, DecisionCore, FallbackReason, Params};
+use concord_map::{BuiltIn, Map, MapError};
 use hdrhistogram::Histogram;
 use iceoryx2::config::Config;
 use iceoryx2::port::publisher::Publisher;
@@ -46,15 +48,27 @@ pub enum Geometry {
 }
 
 impl Geometry {
-    pub fn morphology(self) -> concord_core::Morphology {
-        use concord_core::scene::BuiltIn;
-        concord_core::Morphology::built_in(match self {
+    /// The built-in map (`deploy/maps/`).
+    pub fn built_in(self) -> BuiltIn {
+        match self {
             Geometry::PaperIntersection => BuiltIn::PaperIntersection,
             Geometry::Merge => BuiltIn::Merge,
             Geometry::HighwayEnvIntersection => BuiltIn::HighwayEnvIntersection,
             Geometry::HighwayEnvMerge => BuiltIn::HighwayEnvMerge,
-        })
+        }
     }
+
+    pub fn morphology(self) -> concord_core::Morphology {
+        self.built_in().morphology()
+    }
+}
+
+/// The road the core drives on: a map, and the ego's route lane when one is configured.
+#[derive(Debug, Clone)]
+pub struct Road {
+    pub map: Map,
+    /// Replaces every scene frame's `ego_route_lane` (`service.route`).
+    pub route_lane: Option<u8>,
 }
 
 /// Loop settings of the core process.
@@ -73,8 +87,15 @@ pub struct ServiceConfig {
     pub stats_period_s: f64,
     /// Period of the statistics line on stderr, s (0: only on exit).
     pub print_period_s: f64,
-    /// Geometry of the road.
+    /// Geometry of the road: a built-in map.
     pub geometry: Geometry,
+    /// A map file, replacing `geometry`: Concord's TOML format (`deploy/maps/README.md`) or a
+    /// SUMO network (`*.net.xml`).
+    pub map: Option<PathBuf>,
+    /// The ego's route: the id of a lane of the map (of a SUMO network, a movement
+    /// "incoming lane>outgoing lane" or "incoming edge>outgoing edge"). Scene frames then need
+    /// not name it: their `ego_route_lane` is replaced by this lane's index.
+    pub route: Option<String>,
     /// Intents parsed by the sidecar from language apply for this long after the advice that
     /// carried them, s.
     pub intent_hold_s: f64,
@@ -90,8 +111,29 @@ impl Default for ServiceConfig {
             stats_period_s: 1.0,
             print_period_s: 10.0,
             geometry: Geometry::PaperIntersection,
+            map: None,
+            route: None,
             intent_hold_s: 10.0,
         }
+    }
+}
+
+impl ServiceConfig {
+    /// Loads the configured map (`map`, else the built-in `geometry`) and resolves `route`.
+    pub fn road(&self) -> Result<Road, String> {
+        let route = |e: MapError| format!("service.route: {e}");
+        let (map, route_lane) = match &self.map {
+            Some(path) => {
+                Map::load_route(path, self.route.as_deref()).map_err(|e| e.to_string())?
+            }
+            None => {
+                let map = self.geometry.built_in().map();
+                let lane = self.route.as_deref().map(|id| map.lane_index(id));
+                let lane = lane.transpose().map_err(route)?;
+                (map, lane)
+            }
+        };
+        Ok(Road { map, route_lane })
     }
 }
 
@@ -236,6 +278,7 @@ struct Ports {
 struct Loop<'a> {
     core: &'a mut DecisionCore,
     cfg: &'a ServiceConfig,
+    route_lane: Option<u8>,
     ports: Ports,
     notifier: Notifier,
     stats: CoreStats,
@@ -262,20 +305,24 @@ struct Loop<'a> {
 }
 
 /// Runs the core loop until SIGINT, SIGTERM or `stop`; returns the final statistics.
+///
+/// `route_lane`, when given, replaces every frame's `ego_route_lane` ([`Road::route_lane`]).
 pub fn run(
     core: &mut DecisionCore,
     cfg: &ServiceConfig,
+    route_lane: Option<u8>,
     rt: &RealtimeConfig,
     iox_config: &Config,
     stop: StopAfter,
 ) -> Result<CoreStats, IpcError> {
-    run_observed(core, cfg, rt, iox_config, stop, |_| {})
+    run_observed(core, cfg, route_lane, rt, iox_config, stop, |_| {})
 }
 
 /// [`run`], calling `observe` with the counters after every tick (on the loop thread).
 pub fn run_observed(
     core: &mut DecisionCore,
     cfg: &ServiceConfig,
+    route_lane: Option<u8>,
     rt: &RealtimeConfig,
     iox_config: &Config,
     stop: StopAfter,
@@ -302,6 +349,7 @@ pub fn run_observed(
     let mut state = Loop {
         core,
         cfg,
+        route_lane,
         ports,
         notifier: Notifier::from_env(),
         stats: CoreStats {
@@ -465,6 +513,9 @@ impl Loop<'_> {
             Ok(s) => s,
             Err(_) => return self.reject(FrameReject::BadCode),
         };
+        if let Some(lane) = self.route_lane {
+            scene.ego_lane = lane;
+        }
         self.intents.apply(&mut scene, rx);
         let started = now_ns();
         let decision = match self.core.step(&scene, secs(started), self.advice.as_ref()) {

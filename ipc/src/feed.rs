@@ -8,8 +8,9 @@
 
 use std::time::Duration;
 
-use concord_core::scene::{merge, paper, AgentState, Morphology, Scene, Vec2, MAX_AGENTS};
+use concord_core::scene::{AgentState, Morphology, Scene, Vec2, MAX_AGENTS};
 use concord_core::trajectory::{Trajectory, TrajectoryPoint};
+use concord_map::{merge, paper};
 use iceoryx2::config::Config;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::*;

@@ -2,13 +2,14 @@
 //! malformed advice or a failure report installs nothing (the scenes after it are decided as
 //! before), and the deadline is judged by the advice's publish stamp, to the millisecond, at
 //! 20, 50 and 100 Hz; the intents a valid advice carries reach the core's scenes until they
-//! expire; every advice received is counted once. A test thread plays the sidecar.
+//! expire; every advice received is counted once; a configured route replaces the lane the
+//! frames name. A test thread plays the sidecar.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use concord_core::scene::{paper, AgentState, IntentAction, Scene, Task, Vec2};
+use concord_core::scene::{AgentState, IntentAction, Scene, Task, Turn, Vec2};
 use concord_core::{AdviceVerdict, DecisionCore, FallbackReason, Maneuver, Params};
 use concord_ipc::clock::now_ns;
 use concord_ipc::core_service::{self, ServiceConfig, StopAfter};
@@ -17,6 +18,7 @@ use concord_ipc::wire::{
     AdviceRequest, CoreStats, WireAdvice, WireAgentIntent, WireIntent, UNKNOWN, WIRE_OBJECTS,
 };
 use concord_ipc::{iox, services};
+use concord_map::paper;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
@@ -85,10 +87,12 @@ fn run(
     let mut params = Params::default();
     params.trajectory.samples = 128;
     params.advice.deadline_s = 0.3;
-    let mut core = Box::new(DecisionCore::new(params, cfg.geometry.morphology()).unwrap());
+    let road = cfg.road().expect("the map loads");
+    let mut core = Box::new(DecisionCore::new(params, road.map.morphology()).unwrap());
     let stats = core_service::run(
         &mut core,
         &cfg,
+        road.route_lane,
         &RealtimeConfig::default(),
         &config,
         StopAfter {
@@ -340,4 +344,33 @@ fn the_intents_of_an_advice_reach_the_scenes_until_they_expire() {
             "held past intent_hold_s"
         );
     });
+}
+
+/// With `service.route` set, the core decides on that lane whatever the frames name: the
+/// feeder's frames name the left turn, the route is the straight lane beside it, and every
+/// request carries the straight lane's turn.
+#[test]
+fn a_configured_route_replaces_the_lane_the_frames_name() {
+    for (route, turn) in [(None, Turn::Left), (Some("west_straight"), Turn::Straight)] {
+        let cfg = ServiceConfig {
+            route: route.map(str::to_string),
+            ..service(
+                &format!("intake-route-{}-{route:?}/", std::process::id()),
+                20.0,
+            )
+        };
+        run(cfg, true, 1.0, move |requests, _| {
+            let first = next_request(requests, 0);
+            let later = next_request(requests, first.issued_ns);
+            for r in [first, later] {
+                assert_eq!(r.route_turn, turn as u8, "route {route:?}");
+            }
+        });
+    }
+    let unknown = ServiceConfig {
+        route: Some("nowhere".into()),
+        ..ServiceConfig::default()
+    };
+    let e = unknown.road().unwrap_err();
+    assert!(e.contains("service.route") && e.contains("cav_left"), "{e}");
 }

@@ -7,12 +7,13 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-use concord_core::scene::{paper, AgentState, Scene, Vec2};
+use concord_core::scene::{AgentState, Scene, Vec2};
 use concord_core::{DecisionCore, Params};
 use concord_ipc::core_service::{self, Geometry, ServiceConfig, StopAfter};
 use concord_ipc::iox;
 use concord_ipc::system::RealtimeConfig;
 use concord_ipc::wire::CoreStats;
+use concord_map::paper;
 
 #[path = "../../core/tests/counting_allocator/mod.rs"]
 mod counting_allocator;
@@ -55,6 +56,7 @@ fn ticks_allocate_nothing_but_iceoryx2s_per_sample_state() {
     let stats = core_service::run_observed(
         &mut core,
         &cfg,
+        None,
         &RealtimeConfig::default(),
         &config,
         StopAfter {

@@ -2,11 +2,12 @@
 //! scene frame, an advice or the configuration is refused with the field named, and the core
 //! decides on the next good input as before.
 
-use concord_core::scene::{paper, AgentState, Scene, Vec2};
+use concord_core::scene::{AgentState, Scene, Vec2};
 use concord_core::DecisionCore;
 use concord_ipc::clock::now_ns;
 use concord_ipc::core_service::RunConfig;
 use concord_ipc::wire::{SceneFrame, WireAdvice, WireAgent, WireIntent};
+use concord_map::paper;
 
 #[path = "../../tests/support/toml_paths.rs"]
 mod toml_paths;

@@ -34,15 +34,14 @@ use std::sync::atomic::AtomicU64;
 use std::sync::{mpsc as std_mpsc, Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use concord_core::scene::{
-    paper, AgentState, BuiltIn, IntentAction, Morphology, Scene, Style, Task, Vec2,
-};
+use concord_core::scene::{AgentState, IntentAction, Scene, Style, Task, Vec2};
 use concord_core::{Advice, AdviceVerdict, Decision, DecisionCore, Maneuver, Params};
 use concord_ipc::clock::now_ns;
 use concord_ipc::wire::{
     AdviceRequest, Audience, EhmiKind, EhmiMessage, IntentText, TextSource, WireAdvice,
     WireDecision, WireIntent,
 };
+use concord_map::{paper, BuiltIn};
 use concord_sidecar::bus::Outbound;
 use concord_sidecar::config::{PromptFormat, SidecarConfig};
 use concord_sidecar::ehmi::{self, Executed, Turn};
@@ -122,11 +121,8 @@ fn first_step() -> (Scene, DecisionCore, Decision) {
         -std::f64::consts::FRAC_PI_2,
         6.0,
     ));
-    let mut core = DecisionCore::new(
-        Params::default(),
-        Morphology::built_in(BuiltIn::PaperIntersection),
-    )
-    .unwrap();
+    let mut core =
+        DecisionCore::new(Params::default(), BuiltIn::PaperIntersection.morphology()).unwrap();
     let d = core.step(&scene, scene.time_s, None).unwrap();
     (scene, core, d)
 }

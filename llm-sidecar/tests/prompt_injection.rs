@@ -19,9 +19,10 @@ mod local_llm;
 use std::time::{Duration, Instant};
 
 use concord_core::advice::Advice;
-use concord_core::scene::{paper, AgentState, BuiltIn, Morphology, Scene, Vec2};
+use concord_core::scene::{AgentState, Scene, Vec2};
 use concord_core::{AdviceVerdict, Decision, DecisionCore, DecisionSource, Maneuver, Params};
 use concord_ipc::wire::AdviceRequest;
+use concord_map::{paper, BuiltIn};
 use concord_sidecar::config::{LlmConfig, PromptFormat};
 use concord_sidecar::llm::LlmClient;
 use concord_sidecar::prompt::{self, Stated};
@@ -57,11 +58,8 @@ fn calm() -> Scene {
 /// Runs the core on `scene`, issues a request, and weighs `advised` with `confidence` 50 ms
 /// later. Returns the request (for the prompt) and the decision.
 fn weigh(scene: &Scene, advised: Option<(Maneuver, f64)>) -> (AdviceRequest, Decision) {
-    let mut core = DecisionCore::new(
-        Params::default(),
-        Morphology::built_in(BuiltIn::PaperIntersection),
-    )
-    .unwrap();
+    let mut core =
+        DecisionCore::new(Params::default(), BuiltIn::PaperIntersection.morphology()).unwrap();
     let first = core.step(scene, scene.time_s, None).unwrap();
     let request = AdviceRequest::from_core(
         first.cycle,

@@ -282,7 +282,7 @@ pub fn compute(samples: &[Sample], layout: &Layout) -> Metrics {
 mod tests {
     use super::*;
     use crate::world::{ScenarioKind, World};
-    use concord_core::scene::paper;
+    use concord_map::paper;
 
     /// A layout of `n` HDVs with zones of 5 m, no crossing lanes.
     fn zones(n: usize) -> Layout {

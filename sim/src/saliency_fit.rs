@@ -14,8 +14,9 @@
 //! (400 steps of 0.5). Deterministic for a seed.
 
 use concord_core::saliency::FEATURES;
-use concord_core::scene::{paper, AgentState, BuiltIn, Morphology, Scene, Vec2};
+use concord_core::scene::{AgentState, Morphology, Scene, Vec2};
 use concord_core::{DecisionCore, Params};
+use concord_map::{paper, BuiltIn};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
@@ -67,7 +68,7 @@ fn at(m: &Morphology, mv: &Mover, t: f64, id: u32) -> AgentState {
 /// `n` labelled examples from `seed`.
 pub fn dataset(n: usize, seed: u64) -> Vec<Example> {
     let mut rng = SmallRng::seed_from_u64(seed);
-    let morph = Morphology::built_in(BuiltIn::PaperIntersection);
+    let morph = BuiltIn::PaperIntersection.morphology();
     let stop = morph.lane(paper::CAV_LEFT).stop_s;
     // Saliency does not depend on the trajectory stage: sample little of it.
     let mut params = Params::default();

@@ -5,7 +5,8 @@
 //! (at least [`ZONE_HALF_M`]) along both lanes around it. HDVs on one lane follow each other
 //! (the one ahead is the leader).
 
-use concord_core::scene::{merge, paper, AgentState, BuiltIn, Morphology, Scene, Vec2};
+use concord_core::scene::{AgentState, Morphology, Scene, Vec2};
+use concord_map::{merge, paper, BuiltIn};
 
 /// Lateral acceleration every CAV controller keeps to in curves, m/s² (the core's default
 /// `max_lateral_accel_mps2`), and how far ahead it looks for them, m.
@@ -158,7 +159,7 @@ impl World {
             ),
             ScenarioKind::Merge => (BuiltIn::Merge, merge::RAMP, merge::MAIN, true),
         };
-        let morph = Morphology::built_in(built_in);
+        let morph = built_in.morphology();
         let (ego_conflict_s, conflict_s) = morph
             .conflict_between(ego_lane, hdv_lane)
             .expect("the scenario's lanes conflict");

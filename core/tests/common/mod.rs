@@ -1,8 +1,9 @@
 //! Scene builders shared by the core's integration tests.
 #![allow(dead_code)]
 
-use concord_core::scene::{paper, AgentState, BuiltIn, Morphology, Scene, Vec2};
+use concord_core::scene::{AgentState, Scene, Vec2};
 use concord_core::{DecisionCore, Params};
+use concord_map::{paper, BuiltIn};
 
 /// The paper's initial scene: CAV at (40, 5) heading west, HDV at (−40, −5) heading east.
 pub fn paper_scene(t: f64, cav_speed: f64, hdv_speed: f64) -> Scene {
@@ -18,6 +19,5 @@ pub fn paper_scene(t: f64, cav_speed: f64, hdv_speed: f64) -> Scene {
 }
 
 pub fn paper_core(params: Params) -> DecisionCore {
-    DecisionCore::new(params, Morphology::built_in(BuiltIn::PaperIntersection))
-        .expect("valid params")
+    DecisionCore::new(params, BuiltIn::PaperIntersection.morphology()).expect("valid params")
 }

@@ -23,9 +23,10 @@ use std::collections::BTreeMap;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use concord_core::scene::{paper, AgentState, BuiltIn, Scene, TurnSignal, Vec2};
+use concord_core::scene::{AgentState, Scene, TurnSignal, Vec2};
 use concord_core::{DecisionCore, Maneuver, Morphology, Params};
 use concord_ipc::wire::{AdviceRequest, SceneFrame};
+use concord_map::{paper, BuiltIn};
 use concord_sidecar::config::{LlmConfig, PromptFormat, SidecarConfig};
 use concord_sidecar::llm::{LlmClient, LlmError, Reply};
 use concord_sidecar::prompt::{self, ChatMessage};
@@ -117,7 +118,7 @@ struct Snapshot {
 /// The advice request the core issues at `frame` (t = frame / 20 s), after a fresh core has
 /// decided on the preceding second at 20 Hz.
 fn snapshot(frame: u64, seed: u64) -> Snapshot {
-    let morph = Morphology::built_in(BuiltIn::PaperIntersection);
+    let morph = BuiltIn::PaperIntersection.morphology();
     let mut core = DecisionCore::new(Params::default(), morph).expect("default parameters");
     let (ego, others) = cars(seed);
     let mut frames = Vec::new();

@@ -1,19 +1,63 @@
-//! The built-in geometries of highway-env's intersection-v0 (`BuiltIn::HighwayEnvIntersection`)
-//! and merge-v0 (`BuiltIn::HighwayEnvMerge`, in `mod merge`): lanes, conflict points against
-//! hand-computed ones, and lane matching of poses as highway-env reports them.
+//! The map files of highway-env's intersection-v0 (`deploy/maps/highway-env-intersection.toml`)
+//! and merge-v0 (`deploy/maps/highway-env-merge.toml`, in `mod merge`) against highway-env's
+//! own dimensions (1.12.1, `_make_road`): lanes, conflict points against hand-computed ones,
+//! and lane matching of poses as highway-env reports them.
 
-use concord_core::scene::highway_env_intersection::*;
 use concord_core::scene::{
-    AgentState, BuiltIn, Morphology, Turn, TurnSignal, Vec2, MAX_LANES, MAX_LANE_POINTS,
+    AgentState, Morphology, Turn, TurnSignal, Vec2, MAX_LANES, MAX_LANE_POINTS,
 };
 use concord_core::{DecisionCore, Params};
+use concord_map::BuiltIn;
+use highway_env_intersection::*;
 use std::f64::consts::{FRAC_PI_2, PI};
+
+/// highway-env's intersection-v0 road, and the lane index of each movement in the map file
+/// (checked by `the_lane_indices_are_the_files`).
+mod highway_env_intersection {
+    /// Lane width, m (`AbstractLane.DEFAULT_WIDTH`).
+    pub const LANE_WIDTH_M: f64 = 4.0;
+    /// Length of each approach lane, m.
+    pub const APPROACH_M: f64 = 100.0;
+    /// Distance from the centre to where approaches end and exits begin, m.
+    pub const OUTER_M: f64 = 11.0;
+    /// Radius of right turns, m.
+    pub const RIGHT_TURN_RADIUS_M: f64 = 9.0;
+    /// Radius of left turns, m.
+    pub const LEFT_TURN_RADIUS_M: f64 = 13.0;
+    /// Lateral offset of each lane centre from the road's axis, m.
+    pub const HALF_LANE_M: f64 = 2.0;
+
+    /// From the south (x = 2, towards −y), turning left to the west exit: the ego's route.
+    pub const EGO_LEFT: u8 = 0;
+    /// From the north (x = −2, towards +y), straight on: oncoming traffic; crosses the turn.
+    pub const NORTH_STRAIGHT: u8 = 1;
+    /// From the north, turning right into the west exit: joins the ego's exit lane.
+    pub const NORTH_RIGHT: u8 = 2;
+    /// From the north, turning left to the east exit: passes the ego's turn without crossing.
+    pub const NORTH_LEFT: u8 = 3;
+    /// From the west (y = 2, towards +x), straight on: priority road; crosses the turn.
+    pub const WEST_STRAIGHT: u8 = 4;
+    /// From the west, turning left to the north exit: crosses the turn.
+    pub const WEST_LEFT: u8 = 5;
+    /// From the east (y = −2, towards −x), straight on: priority road; joins the ego's exit.
+    pub const EAST_STRAIGHT: u8 = 6;
+    /// From the east, turning left to the south exit: crosses the turn.
+    pub const EAST_LEFT: u8 = 7;
+    /// From the west, turning right to the south exit: shares the west approach, then turns
+    /// away from the ego's route (concentric with its turn, 4 m inside it).
+    pub const WEST_RIGHT: u8 = 8;
+    /// From the east, turning right to the north exit: shares the east approach, then turns
+    /// away from the ego's route.
+    pub const EAST_RIGHT: u8 = 9;
+    /// Number of lanes.
+    pub const LANES: usize = 10;
+}
 
 /// Chords of 1 m on a 13 m arc sag by 1 cm; crossings of two chorded arcs move by a few.
 const TOL: f64 = 0.05;
 
 fn morph() -> Morphology {
-    Morphology::built_in(BuiltIn::HighwayEnvIntersection)
+    BuiltIn::HighwayEnvIntersection.morphology()
 }
 
 fn conflict_point(m: &Morphology, a: u8, b: u8) -> Option<(f64, f64, Vec2)> {
@@ -40,7 +84,8 @@ fn lanes_fit_the_core_and_reproduce_highway_env_lengths() {
     let quarter = |r: f64| r * FRAC_PI_2;
     for (i, lane) in m.lanes().iter().enumerate() {
         assert!(lane.points().len() <= MAX_LANE_POINTS, "lane {i}");
-        assert_eq!(lane.half_width, 2.0, "lane {i}");
+        assert_eq!(lane.half_width, HALF_LANE_M, "lane {i}");
+        assert_eq!(lane.half_width, 0.5 * LANE_WIDTH_M, "lane {i}");
         assert_eq!(lane.stop_s, APPROACH_M, "lane {i}");
         // Approach, junction, exit: 100 m + (22 m straight | a quarter circle) + 100 m.
         let junction = match lane.turn {
@@ -176,18 +221,77 @@ fn a_core_on_the_geometry_sees_the_oncoming_car_as_a_risky_conflict() {
     assert!(near(c.point, -2.0, 11.0 - 88f64.sqrt()));
 }
 
+#[test]
+fn the_lane_indices_are_the_files() {
+    let map = BuiltIn::HighwayEnvIntersection.map();
+    for (id, index) in [
+        ("ego_left", EGO_LEFT),
+        ("north_straight", NORTH_STRAIGHT),
+        ("north_right", NORTH_RIGHT),
+        ("north_left", NORTH_LEFT),
+        ("west_straight", WEST_STRAIGHT),
+        ("west_left", WEST_LEFT),
+        ("east_straight", EAST_STRAIGHT),
+        ("east_left", EAST_LEFT),
+        ("west_right", WEST_RIGHT),
+        ("east_right", EAST_RIGHT),
+    ] {
+        assert_eq!(map.lane_index(id).unwrap(), index, "{id}");
+    }
+    let merge = BuiltIn::HighwayEnvMerge.map();
+    assert_eq!(merge.ids(), ["ego_right", "main_left", "ramp"]);
+}
+
 // ---- merge-v0 (`BuiltIn::HighwayEnvMerge`) ----
 
 mod merge {
-    use concord_core::scene::highway_env_merge::*;
-    use concord_core::scene::{
-        AgentState, BuiltIn, Morphology, Turn, Vec2, MAX_LANES, MAX_LANE_POINTS,
-    };
+    use concord_core::scene::{AgentState, Morphology, Turn, Vec2, MAX_LANES, MAX_LANE_POINTS};
     use concord_core::{DecisionCore, Params};
+    use concord_map::BuiltIn;
+    use highway_env_merge::*;
     use std::f64::consts::PI;
 
+    /// highway-env's merge-v0 road, and the lane index of each lane in the map file.
+    mod highway_env_merge {
+        /// Lane width, m (`AbstractLane.DEFAULT_WIDTH`).
+        pub const LANE_WIDTH_M: f64 = 4.0;
+        /// Where the main road ends, m (x of node d).
+        pub const ROAD_END_M: f64 = 460.0;
+        /// y of the left-hand main lane (highway-env lane index 0).
+        pub const LEFT_Y_M: f64 = 0.0;
+        /// y of the right-hand main lane (index 1), the ego's.
+        pub const RIGHT_Y_M: f64 = 4.0;
+        /// y of the ramp's straight approach (j → k).
+        pub const RAMP_Y_M: f64 = 14.5;
+        /// y of the auxiliary lane (b → c, index 2).
+        pub const AUX_Y_M: f64 = 8.0;
+        /// x where the ramp's sine section begins (node k).
+        pub const SINE_START_M: f64 = 150.0;
+        /// x where the sine section ends and the auxiliary lane begins (node b).
+        pub const AUX_START_M: f64 = 230.0;
+        /// x where the auxiliary lane ends at an obstacle (node c).
+        pub const AUX_END_M: f64 = 310.0;
+        /// Length along x of the core's taper from the auxiliary lane into the right-hand lane, m.
+        pub const TAPER_M: f64 = 20.0;
+        /// x where the ramp joins the ego's lane: the conflict point.
+        pub const JOIN_M: f64 = AUX_START_M + TAPER_M;
+        /// x beyond which highway-env ends the episode (`MergeEnv._is_terminated`).
+        pub const TERMINATION_X_M: f64 = 370.0;
+        /// Chord length along x of the sampled sine section, m.
+        pub const SINE_STEP_M: f64 = 5.0;
+
+        /// Right-hand main lane, y = 4 (highway-env `("a", "b", 1)` onwards): the ego's route.
+        pub const EGO_RIGHT: u8 = 0;
+        /// Left-hand main lane, y = 0 (`("a", "b", 0)` onwards); parallel, no conflict.
+        pub const MAIN_LEFT: u8 = 1;
+        /// On-ramp (`j → k → b`), tapering into the ego's lane from the auxiliary lane.
+        pub const RAMP: u8 = 2;
+        /// Number of lanes.
+        pub const LANES: usize = 3;
+    }
+
     fn morph() -> Morphology {
-        Morphology::built_in(BuiltIn::HighwayEnvMerge)
+        BuiltIn::HighwayEnvMerge.morphology()
     }
 
     fn near(p: Vec2, x: f64, y: f64, tol: f64) -> bool {
@@ -206,20 +310,26 @@ mod merge {
         const { assert!(LANES <= MAX_LANES) };
         for (i, lane) in m.lanes().iter().enumerate() {
             assert!(lane.points().len() <= MAX_LANE_POINTS, "lane {i}");
-            assert_eq!(lane.half_width, 2.0, "lane {i}");
+            assert_eq!(lane.half_width, 0.5 * LANE_WIDTH_M, "lane {i}");
             assert_eq!(lane.turn, Turn::Straight, "lane {i}");
         }
-        // Main lanes: 460 m straight at y = 4 (the ego's) and y = 0; stop line at the join.
-        for (lane, y) in [(EGO_RIGHT, 4.0), (MAIN_LEFT, 0.0)] {
+        // Main lanes: 460 m straight at y = 4 (the ego's) and y = 0, with vertices where the
+        // auxiliary lane begins and ends; stop line at the join.
+        for (lane, y) in [(EGO_RIGHT, RIGHT_Y_M), (MAIN_LEFT, LEFT_Y_M)] {
             let l = m.lane(lane);
-            assert!((l.length() - 460.0).abs() < 1e-9);
+            assert!((l.length() - ROAD_END_M).abs() < 1e-9);
             assert!(near(l.points()[0], 0.0, y, 1e-9));
-            assert!(near(*l.points().last().unwrap(), 460.0, y, 1e-9));
+            assert!(near(l.points()[1], AUX_START_M, y, 1e-9));
+            assert!(near(l.points()[2], AUX_END_M, y, 1e-9));
+            assert!(near(*l.points().last().unwrap(), ROAD_END_M, y, 1e-9));
             assert_eq!(l.stop_s, JOIN_M);
         }
-        // Ramp: highway-env's j → k along y = 14.5, then the sine section to (230, 8).
+        // Ramp: highway-env's j → k along y = 14.5, then the sine section to (230, 8) in
+        // chords of 5 m.
         let ramp = m.lane(RAMP);
-        assert!(near(ramp.points()[0], 0.0, 14.5, 1e-9));
+        assert!(near(ramp.points()[0], 0.0, RAMP_Y_M, 1e-9));
+        assert!(near(ramp.points()[1], SINE_START_M, RAMP_Y_M, 1e-9));
+        assert!((ramp.points()[2].x - SINE_START_M - SINE_STEP_M).abs() < 1e-9);
         for x in [150.0, 160.0, 172.5, 190.0, 207.5, 220.0, 230.0] {
             let f = ramp.project(Vec2::new(x, ramp_sine_y(x)));
             assert!(f.l.abs() < 0.02, "x = {x}: {} m off the sine", f.l);
@@ -233,9 +343,14 @@ mod merge {
         );
         // Its stop line is where highway-env's auxiliary lane begins.
         let (stop, _, _) = ramp.pose_at(ramp.stop_s, 0);
-        assert!(near(stop, 230.0, 8.0, 1e-6), "{stop:?}");
+        assert!(near(stop, AUX_START_M, AUX_Y_M, 1e-6), "{stop:?}");
         // It ends on the ego's lane.
-        assert!(near(*ramp.points().last().unwrap(), 460.0, 4.0, 1e-9));
+        assert!(near(
+            *ramp.points().last().unwrap(),
+            ROAD_END_M,
+            RIGHT_Y_M,
+            1e-9
+        ));
     }
 
     #[test]

@@ -1,0 +1,359 @@
+//! SUMO networks (`.net.xml`, as `netconvert` writes them from OpenDRIVE, OpenStreetMap or
+//! plain XML): each connection through a junction becomes one lane of the map, a *movement*:
+//! the incoming lane's shape (its end is the stop line), the junction-internal lanes it runs
+//! through (`via`, followed to the end of the chain) and the outgoing lane's shape. Its width
+//! is the incoming lane's, its turn the connection's `dir`, and its id
+//! `"{incoming lane}>{outgoing lane}"`, e.g. `"EC_0>CS_0"`. Turnarounds are left out.
+//!
+//! Right of way is SUMO's own: at each junction, link i must yield to link j when bit j of
+//! request i's `response` is set (the bit strings list link n−1 first). It is written into
+//! every conflict between two movements of one junction; movements of different junctions
+//! are first come, first served. Link i is the connection whose internal lanes include the
+//! junction's i-th `intLanes` entry. Traffic lights are not modelled: their junctions' static
+//! requests apply.
+//!
+//! Only movements near the ego's route are kept (the core holds at most
+//! [`MAX_LANES`](concord_core::scene::MAX_LANES)): those of the route's junction and of every
+//! junction within [`RELEVANT_RADIUS_M`] of it. Without a route, every movement is kept.
+
+use std::collections::HashMap;
+
+use concord_core::scene::{Lane, RightOfWay, Turn, Vec2, MAX_LANES, MAX_LANE_POINTS};
+
+use crate::{Map, MapError};
+
+/// Junctions whose centre lies within this distance of the route's junction keep their
+/// movements, m.
+pub const RELEVANT_RADIUS_M: f64 = 60.0;
+/// Lane width SUMO assumes when a lane has none, m.
+const SUMO_DEFAULT_WIDTH_M: f64 = 3.2;
+/// Consecutive vertices closer than this are merged when shapes are joined, m.
+const JOIN_TOLERANCE_M: f64 = 0.05;
+
+struct SumoLane {
+    shape: Vec<Vec2>,
+    width: f64,
+}
+
+struct Movement {
+    id: String,
+    from_edge: String,
+    to_edge: String,
+    junction: String,
+    /// Junction-internal lanes, in driving order.
+    via: Vec<String>,
+    turn: Turn,
+    points: Vec<Vec2>,
+    stop_s: f64,
+    width: f64,
+}
+
+struct Junction {
+    centre: Vec2,
+    int_lanes: Vec<String>,
+    /// `response` of each request, by link index.
+    responses: Vec<Vec<bool>>,
+}
+
+fn attr<'a>(node: roxmltree::Node<'a, '_>, name: &str) -> Result<&'a str, String> {
+    node.attribute(name).ok_or_else(|| {
+        format!(
+            "<{}> on line {} has no `{name}`",
+            node.tag_name().name(),
+            node.document().text_pos_at(node.range().start).row
+        )
+    })
+}
+
+fn number(node: roxmltree::Node<'_, '_>, name: &str) -> Result<f64, String> {
+    let text = attr(node, name)?;
+    text.parse::<f64>()
+        .ok()
+        .filter(|x| x.is_finite())
+        .ok_or_else(|| {
+            format!(
+                "<{}> {name} = {text:?}: not a finite number",
+                node.tag_name().name()
+            )
+        })
+}
+
+fn shape(text: &str) -> Result<Vec<Vec2>, String> {
+    text.split_whitespace()
+        .map(|pair| {
+            let mut xy = pair.split(',').map(str::parse::<f64>);
+            match (xy.next(), xy.next()) {
+                (Some(Ok(x)), Some(Ok(y))) if x.is_finite() && y.is_finite() => Ok(Vec2::new(x, y)),
+                _ => Err(format!("shape vertex {pair:?}: not x,y")),
+            }
+        })
+        .collect()
+}
+
+/// Appends `more` to `points`, dropping a first vertex that repeats the last one.
+fn join(points: &mut Vec<Vec2>, more: &[Vec2]) {
+    for p in more {
+        if points
+            .last()
+            .is_none_or(|q| q.minus(*p).norm() > JOIN_TOLERANCE_M)
+        {
+            points.push(*p);
+        }
+    }
+}
+
+/// Parses a SUMO network and keeps the movements near `route` (a movement id or
+/// `"{incoming edge}>{outgoing edge}"`); `origin` names the file in errors.
+pub fn parse(text: &str, origin: &str, route: Option<&str>) -> Result<(Map, Option<u8>), MapError> {
+    let err = |msg: String| MapError(format!("map {origin}: {msg}"));
+    let doc = roxmltree::Document::parse(text).map_err(|e| err(format!("not XML: {e}")))?;
+    let net = doc.root_element();
+    if net.tag_name().name() != "net" {
+        return Err(err("not a SUMO network (no <net>)".into()));
+    }
+    let mut lanes: HashMap<String, SumoLane> = HashMap::new();
+    let mut edge_of: HashMap<String, String> = HashMap::new();
+    let mut junctions: HashMap<String, Junction> = HashMap::new();
+    let mut edge_to: HashMap<String, String> = HashMap::new();
+    for node in net.children().filter(|n| n.is_element()) {
+        match node.tag_name().name() {
+            "edge" => {
+                let edge = attr(node, "id").map_err(err)?.to_string();
+                if let Some(to) = node.attribute("to") {
+                    edge_to.insert(edge.clone(), to.to_string());
+                }
+                for lane in node.children().filter(|n| n.has_tag_name("lane")) {
+                    let id = attr(lane, "id").map_err(err)?.to_string();
+                    let shape = shape(attr(lane, "shape").map_err(err)?)
+                        .map_err(|e| err(format!("lane {id}: {e}")))?;
+                    let width = match lane.attribute("width") {
+                        Some(_) => number(lane, "width").map_err(err)?,
+                        None => SUMO_DEFAULT_WIDTH_M,
+                    };
+                    edge_of.insert(id.clone(), edge.clone());
+                    lanes.insert(id, SumoLane { shape, width });
+                }
+            }
+            "junction" => {
+                let id = attr(node, "id").map_err(err)?.to_string();
+                if node.attribute("type") == Some("internal") {
+                    continue;
+                }
+                let centre = Vec2::new(
+                    number(node, "x").map_err(err)?,
+                    number(node, "y").map_err(err)?,
+                );
+                let int_lanes = node
+                    .attribute("intLanes")
+                    .unwrap_or("")
+                    .split_whitespace()
+                    .map(str::to_string)
+                    .collect::<Vec<_>>();
+                let mut responses = vec![Vec::new(); int_lanes.len()];
+                for r in node.children().filter(|n| n.has_tag_name("request")) {
+                    let index: usize = attr(r, "index").map_err(err)?.parse().map_err(|_| {
+                        err(format!("junction {id}: a request index is not a number"))
+                    })?;
+                    let bits = attr(r, "response").map_err(err)?;
+                    if index >= responses.len() || bits.len() != int_lanes.len() {
+                        return Err(err(format!(
+                            "junction {id}: request {index} does not match its {} internal lanes",
+                            int_lanes.len()
+                        )));
+                    }
+                    // The string lists link n − 1 first.
+                    responses[index] = bits.chars().rev().map(|c| c == '1').collect();
+                }
+                junctions.insert(
+                    id,
+                    Junction {
+                        centre,
+                        int_lanes,
+                        responses,
+                    },
+                );
+            }
+            _ => {}
+        }
+    }
+    // Connections: from a normal lane (with its via chain) and from internal lanes.
+    let mut next_via: HashMap<String, String> = HashMap::new();
+    let mut starts = Vec::new();
+    for c in net.children().filter(|n| n.has_tag_name("connection")) {
+        let from = attr(c, "from").map_err(err)?;
+        let lane_of = |edge: &str, index: &str| format!("{edge}_{index}");
+        let from_lane = lane_of(from, attr(c, "fromLane").map_err(err)?);
+        let to_lane = lane_of(attr(c, "to").map_err(err)?, attr(c, "toLane").map_err(err)?);
+        let via = c.attribute("via").map(str::to_string);
+        if from.starts_with(':') {
+            if let Some(v) = via {
+                next_via.insert(from_lane, v);
+            }
+            continue;
+        }
+        let dir = attr(c, "dir").map_err(err)?;
+        let turn = match dir {
+            "s" => Turn::Straight,
+            "l" | "L" | "partially_left" => Turn::Left,
+            "r" | "R" | "partially_right" => Turn::Right,
+            _ => continue, // turnarounds and invalid
+        };
+        if let Some(v) = via {
+            starts.push((
+                from_lane,
+                to_lane,
+                v,
+                turn,
+                from.to_string(),
+                attr(c, "to").map_err(err)?.to_string(),
+            ));
+        }
+    }
+    let mut movements = Vec::new();
+    for (from_lane, to_lane, first_via, turn, from_edge, to_edge) in starts {
+        let mut via = vec![first_via];
+        while let Some(v) = next_via.get(via.last().unwrap()) {
+            if via.contains(v) || via.len() > 8 {
+                return Err(err(format!("internal lanes after {from_lane} form a loop")));
+            }
+            via.push(v.clone());
+        }
+        let shape_of = |id: &str| {
+            lanes
+                .get(id)
+                .map(|l| l.shape.as_slice())
+                .ok_or_else(|| err(format!("connection {from_lane} > {to_lane}: no lane {id}")))
+        };
+        let incoming = lanes
+            .get(&from_lane)
+            .ok_or_else(|| err(format!("connection from unknown lane {from_lane}")))?;
+        let mut points = Vec::new();
+        join(&mut points, &incoming.shape);
+        let stop_s = points.windows(2).map(|w| w[1].minus(w[0]).norm()).sum();
+        for v in &via {
+            join(&mut points, shape_of(v)?);
+        }
+        join(&mut points, shape_of(&to_lane)?);
+        let junction = edge_to.get(&from_edge).cloned().unwrap_or_default();
+        movements.push(Movement {
+            id: format!("{from_lane}>{to_lane}"),
+            from_edge,
+            to_edge,
+            junction,
+            via,
+            turn,
+            points,
+            stop_s,
+            width: incoming.width,
+        });
+    }
+    if movements.is_empty() {
+        return Err(err("no connection through a junction".into()));
+    }
+    // The route's movement, then the movements to keep.
+    let route_at = match route {
+        None => None,
+        Some(r) => Some(
+            movements
+                .iter()
+                .position(|m| m.id == r)
+                .or_else(|| {
+                    let (from, to) = r.split_once('>')?;
+                    movements
+                        .iter()
+                        .position(|m| m.from_edge == from && m.to_edge == to)
+                })
+                .ok_or_else(|| {
+                    err(format!(
+                        "no movement {r:?}: give \"incoming lane>outgoing lane\" or \
+                         \"incoming edge>outgoing edge\", e.g. {:?}",
+                        movements[0].id
+                    ))
+                })?,
+        ),
+    };
+    let keep: Vec<usize> = match route_at {
+        None => (0..movements.len()).collect(),
+        Some(r) => {
+            let centre = |j: &str| junctions.get(j).map(|j| j.centre);
+            let here = centre(&movements[r].junction);
+            let mut keep = vec![r];
+            keep.extend((0..movements.len()).filter(|&i| {
+                i != r
+                    && match (here, centre(&movements[i].junction)) {
+                        (Some(a), Some(b)) => a.minus(b).norm() <= RELEVANT_RADIUS_M,
+                        _ => false,
+                    }
+            }));
+            keep
+        }
+    };
+    if keep.len() > MAX_LANES {
+        return Err(err(format!(
+            "{} movements{}, more than the core's capacity MAX_LANES = {MAX_LANES}{}",
+            keep.len(),
+            if route.is_some() {
+                format!(" within {RELEVANT_RADIUS_M} m of the route's junction")
+            } else {
+                String::new()
+            },
+            if route.is_some() {
+                ""
+            } else {
+                " (give a route to keep only those near it)"
+            }
+        )));
+    }
+    let mut core_lanes = Vec::with_capacity(keep.len());
+    for &i in &keep {
+        let m = &movements[i];
+        if m.points.len() > MAX_LANE_POINTS {
+            return Err(err(format!(
+                "movement {}: {} vertices, more than the core's capacity \
+                 MAX_LANE_POINTS = {MAX_LANE_POINTS}",
+                m.id,
+                m.points.len()
+            )));
+        }
+        let lane = Lane::new(&m.points, 0.5 * m.width, m.stop_s, m.turn)
+            .map_err(|e| err(format!("movement {}: {e:?}", m.id)))?;
+        core_lanes.push(lane);
+    }
+    let ids: Vec<String> = keep.iter().map(|&i| movements[i].id.clone()).collect();
+    let name = origin.rsplit('/').next().unwrap_or(origin).to_string();
+    let mut map = Map::from_lanes(
+        name,
+        ids,
+        vec![Vec::new(); keep.len()],
+        &core_lanes,
+        Default::default(),
+    )
+    .map_err(|e| err(e.0))?;
+    // SUMO's right of way between the movements of one junction.
+    let link = |m: &Movement| -> Option<usize> {
+        let j = junctions.get(&m.junction)?;
+        j.int_lanes.iter().position(|l| m.via.contains(l))
+    };
+    for (a, &ia) in keep.iter().enumerate() {
+        for (b, &ib) in keep.iter().enumerate().skip(a + 1) {
+            let (ma, mb) = (&movements[ia], &movements[ib]);
+            if ma.junction != mb.junction {
+                continue;
+            }
+            let (Some(la), Some(lb), Some(j)) = (link(ma), link(mb), junctions.get(&ma.junction))
+            else {
+                continue;
+            };
+            let yields = |x: usize, y: usize| {
+                j.responses.get(x).and_then(|r| r.get(y)).copied() == Some(true)
+            };
+            let row = match (yields(la, lb), yields(lb, la)) {
+                (true, false) => RightOfWay::B,
+                (false, true) => RightOfWay::A,
+                _ => RightOfWay::Neither,
+            };
+            map.morphology.set_right_of_way(a as u8, b as u8, row);
+        }
+    }
+    Ok((map, route_at.map(|_| 0)))
+}
