@@ -21,12 +21,12 @@ log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 cargo test --workspace 2>&1 | tee "$log"
 
-step "Python bridges: wire mirror layout, interop with a running core, highway-env (unittest)"
+step "Python bridges: wire mirror layout, interop with a running core, highway-env, SUMO (unittest)"
 python=$(bridges/python/setup.sh)
 target_dir=${CARGO_TARGET_DIR:-target}
 CONCORD_BIN="$(cd "$target_dir" && pwd)/debug/concord"
 export CONCORD_BIN
-(cd bridges/python && "$python" -m unittest -v test_wire_layout test_interop test_highway_bridge) 2>&1 | tee -a "$log"
+(cd bridges/python && "$python" -m unittest -v test_wire_layout test_interop test_highway_bridge test_sumo_bridge) 2>&1 | tee -a "$log"
 
 passed=$(grep -o '[0-9]* passed' "$log" | awk '{s += $1} END {print s + 0}')
 failed=$(grep -o '[0-9]* failed' "$log" | awk '{s += $1} END {print s + 0}')

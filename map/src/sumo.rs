@@ -12,6 +12,10 @@
 //! junction's i-th `intLanes` entry. Traffic lights are not modelled: their junctions' static
 //! requests apply.
 //!
+//! Straight movements come first in the lane order, then right and left turns (an agent without
+//! a turn signal matches the lowest index on a shared approach, and SUMO's vehicles show
+//! blinkers only to turn); with a route, the route's movement is lane 0.
+//!
 //! Only movements near the ego's route are kept (the core holds at most
 //! [`MAX_LANES`](concord_core::scene::MAX_LANES)): those of the route's junction and of every
 //! junction within [`RELEVANT_RADIUS_M`] of it. Without a route, every movement is kept.
@@ -272,13 +276,23 @@ pub fn parse(text: &str, origin: &str, route: Option<&str>) -> Result<(Map, Opti
                 })?,
         ),
     };
+    // On an approach shared by several movements an agent without a turn signal matches the
+    // one with the lowest index (`Morphology::match_lane`): straight movements come first,
+    // as SUMO's vehicles show blinkers only to turn.
+    let rank = |m: &Movement| match m.turn {
+        Turn::Straight => 0,
+        Turn::Right => 1,
+        Turn::Left => 2,
+    };
+    let mut order: Vec<usize> = (0..movements.len()).collect();
+    order.sort_by_key(|&i| rank(&movements[i]));
     let keep: Vec<usize> = match route_at {
-        None => (0..movements.len()).collect(),
+        None => order,
         Some(r) => {
             let centre = |j: &str| junctions.get(j).map(|j| j.centre);
             let here = centre(&movements[r].junction);
             let mut keep = vec![r];
-            keep.extend((0..movements.len()).filter(|&i| {
+            keep.extend(order.into_iter().filter(|&i| {
                 i != r
                     && match (here, centre(&movements[i].junction)) {
                         (Some(a), Some(b)) => a.minus(b).norm() <= RELEVANT_RADIUS_M,
