@@ -44,22 +44,8 @@ fn run_takes_the_geometry_from_the_command_line() {
         ),
         ("highway-env-merge", "highway-env-merge (3 lanes"),
     ] {
-        let prefix = format!("geometry-{}-{arg}/", std::process::id());
-        let out = Command::new(CONCORD)
-            .args([
-                "run",
-                "--prefix",
-                &prefix,
-                "--rate",
-                "50",
-                "--duration",
-                "0.5",
-            ])
-            .args(["--geometry", arg])
-            .output()
-            .expect("concord run starts");
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(out.status.success(), "{err}");
+        let (ok, err) = run_briefly(&format!("geometry-{arg}"), &["--geometry", arg]);
+        assert!(ok, "{err}");
         assert!(err.contains(&format!("map {shown}")), "{err}");
     }
     let bad = Command::new(CONCORD)
@@ -73,9 +59,9 @@ fn maps_dir() -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("deploy/maps")
 }
 
-#[test]
-fn run_loads_a_map_file_and_a_route() {
-    let prefix = format!("map-{}/", std::process::id());
+/// `concord run` for 0.3 s on its own prefix with `road` arguments: (success, stderr).
+fn run_briefly(name: &str, road: &[&str]) -> (bool, String) {
+    let prefix = format!("{name}-{}/", std::process::id());
     let out = Command::new(CONCORD)
         .args([
             "run",
@@ -86,13 +72,23 @@ fn run_loads_a_map_file_and_a_route() {
             "--duration",
             "0.3",
         ])
-        .arg("--map")
-        .arg(maps_dir().join("paper.toml"))
-        .args(["--route", "cav_left"])
+        .args(road)
         .output()
         .expect("concord run starts");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{err}");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn run_loads_a_map_file_and_a_route() {
+    let paper = maps_dir().join("paper.toml");
+    let (ok, err) = run_briefly(
+        "map",
+        &["--map", paper.to_str().unwrap(), "--route", "cav_left"],
+    );
+    assert!(ok, "{err}");
     assert!(
         err.contains("map paper (8 lanes, 15 conflict points, route cav_left (lane 0))"),
         "{err}"

@@ -103,6 +103,34 @@ class SumoBridge(unittest.TestCase):
         self.assertEqual(expected, set(lanes))
 
 
+def netconvert():
+    import sumo
+    return os.path.join(sumo.SUMO_HOME, "bin", "netconvert")
+
+
+class OpenDrive(unittest.TestCase):
+    def test_an_opendrive_road_loads_through_netconvert(self):
+        """OpenDRIVE reaches Concord through SUMO's netconvert (deploy/maps/README.md): the
+        paper's junction written as .xodr and converted back loads with the same movements."""
+        import tempfile
+        with tempfile.TemporaryDirectory() as tmp:
+            xodr, net = os.path.join(tmp, "paper.xodr"), os.path.join(tmp, "paper.net.xml")
+            quiet = {"capture_output": True, "check": True}
+            subprocess.run([netconvert(), "-s", sb.DEFAULT_NET, "--opendrive-output", xodr], **quiet)
+            subprocess.run([netconvert(), "--opendrive-files", xodr, "--no-turnarounds", "true",
+                            "--offset.disable-normalization", "true", "-o", net], **quiet)
+            shape = []
+            for path in (sb.DEFAULT_NET, net):
+                out = subprocess.run([CONCORD, "map", path, "--json"], capture_output=True,
+                                     text=True, check=True)
+                m = json.loads(out.stdout)
+                shape.append((sorted((lane["turn"], round(lane["stop_s_m"], 1),
+                                      round(lane["length_m"], 1)) for lane in m["lanes"]),
+                              len(m["conflicts"])))
+        self.assertEqual(shape[0], shape[1])
+        self.assertEqual(len(shape[0][0]), 12)
+
+
 class Summary(unittest.TestCase):
     def test_counts_and_extremes_per_policy_and_speed(self):
         def ep(policy, speed, **kw):
