@@ -2,6 +2,8 @@
 
 mod llm_experiments;
 
+use std::fmt::Write as _;
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command as Process, ExitCode, Stdio};
 use std::time::Duration;
@@ -543,6 +545,8 @@ fn show_map(file: &Path, route: Option<&str>, json: bool) -> Result<(), String> 
     let (map, route_lane) = concord_map::Map::load_route(file, route).map_err(|e| e.to_string())?;
     let morph = map.morphology();
     let turn = |t: concord_core::scene::Turn| format!("{t:?}").to_lowercase();
+    // Written as a whole at the end; a closed pipe (`| head`) is not an error.
+    let mut out = String::new();
     if json {
         let lanes: Vec<_> = morph
             .lanes()
@@ -567,26 +571,32 @@ fn show_map(file: &Path, route: Option<&str>, json: bool) -> Result<(), String> 
                 })
             })
             .collect();
-        let out = serde_json::json!({
+        let json = serde_json::json!({
             "name": map.name, "route_lane": route_lane, "lanes": lanes, "conflicts": conflicts,
         });
-        println!("{out}");
+        let _ = writeln!(out, "{json}");
+        let _ = std::io::stdout().write_all(out.as_bytes());
         return Ok(());
     }
-    println!(
+    let _ = writeln!(
+        out,
         "map {}: {} lanes, {} conflict points",
         map.name,
         map.ids().len(),
         morph.conflicts().len()
     );
-    println!("lane  id                      turn      level  width m  stop s m  length m");
+    let _ = writeln!(
+        out,
+        "lane  id                      turn      level  width m  stop s m  length m"
+    );
     for (i, (l, id)) in morph.lanes().iter().zip(map.ids()).enumerate() {
         let mark = if route_lane == Some(i as u8) {
             "*"
         } else {
             " "
         };
-        println!(
+        let _ = writeln!(
+            out,
             "{mark}{i:<4} {id:<23} {:<9} {:>5}  {:>7.2}  {:>8.2}  {:>8.2}",
             turn(l.turn),
             l.priority,
@@ -595,14 +605,18 @@ fn show_map(file: &Path, route: Option<&str>, json: bool) -> Result<(), String> 
             l.length()
         );
     }
-    println!("lanes    kind      right of way  point (x, y) m     zone on a m       zone on b m");
+    let _ = writeln!(
+        out,
+        "lanes    kind      right of way  point (x, y) m     zone on a m       zone on b m"
+    );
     for c in morph.conflicts() {
         let who = match c.right_of_way {
             concord_core::scene::RightOfWay::A => format!("lane {}", c.lane_a),
             concord_core::scene::RightOfWay::B => format!("lane {}", c.lane_b),
             concord_core::scene::RightOfWay::Neither => "neither".into(),
         };
-        println!(
+        let _ =
+            writeln!(out,
             "{:>2} x {:<3} {:<9} {:<13} ({:>6.1}, {:>6.1})  [{:>6.1}, {:>6.1}]  [{:>6.1}, {:>6.1}]",
             c.lane_a,
             c.lane_b,
@@ -617,8 +631,9 @@ fn show_map(file: &Path, route: Option<&str>, json: bool) -> Result<(), String> 
         );
     }
     if route.is_some() {
-        println!("* the route's lane");
+        let _ = writeln!(out, "* the route's lane");
     }
+    let _ = std::io::stdout().write_all(out.as_bytes());
     Ok(())
 }
 

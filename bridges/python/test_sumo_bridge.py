@@ -94,10 +94,15 @@ class SumoBridge(unittest.TestCase):
                     nxt = [x[4] for x in ls.lane.getLinks(via) if x[4]]
                     via = nxt[0] if nxt else ""
                 shapes.append(ls.lane.getShape(outgoing))
+                # Within 15 cm: vertices closer than 1 m are merged (MERGE_VERTICES_M); the
+                # stop line and the ends are kept exactly.
                 for shape in shapes:
                     for p in shape:
-                        self.assertLess(distance_to_polyline(p, lane["points"]), 0.01,
+                        self.assertLess(distance_to_polyline(p, lane["points"]), 0.15,
                                         f"{incoming}>{outgoing}: {p}")
+                for p in (shapes[0][0], shapes[0][-1], shapes[-1][-1]):
+                    self.assertIn([round(p[0], 6), round(p[1], 6)],
+                                  [[round(x, 6), round(y, 6)] for x, y in lane["points"]])
                 self.assertAlmostEqual(lane["stop_s_m"], ls.lane.getLength(incoming), delta=0.01)
                 self.assertAlmostEqual(2 * lane["half_width_m"], ls.lane.getWidth(incoming))
         self.assertEqual(expected, set(lanes))

@@ -5,6 +5,10 @@
 //! is the incoming lane's, its turn the connection's `dir`, and its id
 //! `"{incoming lane}>{outgoing lane}"`, e.g. `"EC_0>CS_0"`. Turnarounds are left out.
 //!
+//! Vertices closer than [`MERGE_VERTICES_M`] are merged (SUMO's internal shapes meet in short
+//! pieces whose three-vertex curvature would be far too high), keeping the stop line and the
+//! ends exactly.
+//!
 //! Right of way is SUMO's own: at each junction, link i must yield to link j when bit j of
 //! request i's `response` is set (the bit strings list link n−1 first). It is written into
 //! every conflict between two movements of one junction; movements of different junctions
@@ -31,8 +35,13 @@ use crate::{Map, MapError};
 pub const RELEVANT_RADIUS_M: f64 = 60.0;
 /// Lane width SUMO assumes when a lane has none, m.
 const SUMO_DEFAULT_WIDTH_M: f64 = 3.2;
-/// Consecutive vertices closer than this are merged when shapes are joined, m.
-const JOIN_TOLERANCE_M: f64 = 0.05;
+/// Consecutive vertices closer than this are merged when shapes are joined, m: SUMO's
+/// junction-internal shapes are coarse and their pieces meet at vertices a few centimetres to
+/// a few decimetres apart, where the curvature of three neighbouring vertices (the core's speed
+/// cap in curves) would read a 16 m turn as an 8 m one.
+pub const MERGE_VERTICES_M: f64 = 1.0;
+/// Two anchors (the stop line, the ends) closer than this are one vertex, m.
+const SAME_POINT_M: f64 = 0.05;
 
 struct SumoLane {
     shape: Vec<Vec2>,
@@ -94,16 +103,24 @@ fn shape(text: &str) -> Result<Vec<Vec2>, String> {
         .collect()
 }
 
-/// Appends `more` to `points`, dropping a first vertex that repeats the last one.
-fn join(points: &mut Vec<Vec2>, more: &[Vec2]) {
-    for p in more {
-        if points
-            .last()
-            .is_none_or(|q| q.minus(*p).norm() > JOIN_TOLERANCE_M)
-        {
-            points.push(*p);
+/// The polyline through `points`, each flagged as an anchor (kept exactly: the stop line and the
+/// ends) or not; a vertex within [`MERGE_VERTICES_M`] of the last one kept is dropped, or, if it
+/// is an anchor, replaces that one unless it is an anchor too.
+fn thin(points: &[(Vec2, bool)]) -> Vec<Vec2> {
+    let mut out: Vec<(Vec2, bool)> = Vec::with_capacity(points.len());
+    for &(p, anchor) in points {
+        match out.last_mut() {
+            Some(last) if last.0.minus(p).norm() < MERGE_VERTICES_M => {
+                if anchor && !last.1 {
+                    *last = (p, true);
+                } else if anchor && last.0.minus(p).norm() > SAME_POINT_M {
+                    out.push((p, true));
+                }
+            }
+            _ => out.push((p, anchor)),
         }
     }
+    out.into_iter().map(|(p, _)| p).collect()
 }
 
 /// Parses a SUMO network and keeps the movements near `route` (a movement id or
@@ -231,13 +248,34 @@ pub fn parse(text: &str, origin: &str, route: Option<&str>) -> Result<(Map, Opti
         let incoming = lanes
             .get(&from_lane)
             .ok_or_else(|| err(format!("connection from unknown lane {from_lane}")))?;
-        let mut points = Vec::new();
-        join(&mut points, &incoming.shape);
-        let stop_s = points.windows(2).map(|w| w[1].minus(w[0]).norm()).sum();
+        // Anchors: the incoming lane's ends (its end is the stop line) and the outgoing lane's end.
+        let n_in = incoming.shape.len();
+        let mut flagged: Vec<(Vec2, bool)> = incoming
+            .shape
+            .iter()
+            .enumerate()
+            .map(|(k, p)| (*p, k == 0 || k + 1 == n_in))
+            .collect();
         for v in &via {
-            join(&mut points, shape_of(v)?);
+            flagged.extend(shape_of(v)?.iter().map(|p| (*p, false)));
         }
-        join(&mut points, shape_of(&to_lane)?);
+        let outgoing = shape_of(&to_lane)?;
+        flagged.extend(
+            outgoing
+                .iter()
+                .enumerate()
+                .map(|(k, p)| (*p, k + 1 == outgoing.len())),
+        );
+        let points = thin(&flagged);
+        let stop_line = incoming.shape[n_in - 1];
+        let stop_at = points
+            .iter()
+            .position(|p| p.minus(stop_line).norm() < SAME_POINT_M)
+            .expect("the stop line is an anchor");
+        let stop_s = points[..=stop_at]
+            .windows(2)
+            .map(|w| w[1].minus(w[0]).norm())
+            .sum();
         let junction = edge_to.get(&from_edge).cloned().unwrap_or_default();
         movements.push(Movement {
             id: format!("{from_lane}>{to_lane}"),

@@ -140,3 +140,21 @@ fn a_broken_network_is_an_error_naming_what_is_wrong() {
         assert!(e.0.contains(expected) && e.0.contains(".net.xml"), "{e}");
     }
 }
+
+#[test]
+fn internal_shapes_are_merged_into_vertices_a_metre_apart_and_the_turn_keeps_its_radius() {
+    use concord_map::sumo::MERGE_VERTICES_M;
+    let (map, _) = Map::load_route(&paper(), Some("EC>CS")).unwrap();
+    let morph = map.morphology();
+    let ego = morph.lane(0);
+    for w in ego.points().windows(2) {
+        assert!(w[1].minus(w[0]).norm() >= MERGE_VERTICES_M, "{w:?}");
+    }
+    // SUMO's left turn is a quarter circle of about 16.5 m from (11.5, 5) to (−5, −11.5); its
+    // pieces meet 0.35 m apart at (5.98, 3.6), which unmerged read as an 8.8 m turn.
+    let sharpest = (0..ego.segments())
+        .map(|k| ego.curvature_at(ego.s_at_vertex(k), k))
+        .fold(0.0, f64::max);
+    assert!(1.0 / sharpest > 14.0, "radius {}", 1.0 / sharpest);
+    assert!((ego.stop_s - 88.5).abs() < 1e-9);
+}
