@@ -1,5 +1,6 @@
-//! Replays a highway-env bridge trace (`highway_bridge.py --trace FILE`) through the decision
-//! core, printing per frame the agents' matched lanes, the conflicts, the choice and, for every
+//! Replays a bridge trace (`highway_bridge.py --trace FILE`, or `sumo_bridge.py --trace FILE`
+//! with `CONCORD_REPLAY_MAP=NET CONCORD_REPLAY_ROUTE=ID`) through the decision core, printing
+//! per frame the agents' matched lanes, the conflicts, the choice and, for every
 //! maneuver, the Monte Carlo planning statistics.
 //!
 //! `cargo run --release --example replay_trace -- CONFIG TRACE [FROM_S [TO_S]]`, e.g.
