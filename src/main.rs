@@ -324,7 +324,7 @@ fn main() -> ExitCode {
             config.as_deref(),
             prefix,
             rate,
-            Road {
+            RoadArgs {
                 geometry: geometry.map(GeometryArg::geometry),
                 map,
                 route,
@@ -638,7 +638,7 @@ fn show_map(file: &Path, route: Option<&str>, json: bool) -> Result<(), String> 
 }
 
 /// The road options of `concord run`.
-struct Road {
+struct RoadArgs {
     geometry: Option<Geometry>,
     map: Option<PathBuf>,
     route: Option<String>,
@@ -648,7 +648,7 @@ fn run(
     config: Option<&Path>,
     prefix: Option<String>,
     rate: Option<f64>,
-    road: Road,
+    road: RoadArgs,
     duration: Option<f64>,
     iox_path: Option<&Path>,
 ) -> Result<(), String> {

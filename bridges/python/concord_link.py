@@ -17,6 +17,7 @@ import time
 import iceoryx2 as iox2
 
 import concord_wire as wire
+from pet import wrap
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -89,6 +90,23 @@ class ConcordLink:
         return None
 
 
+def wire_agent(x, y, vx, vy, heading, agent_id, ax=0.0, ay=0.0, signal=0):
+    """A valid wire agent of a simulator's state, with no known intent (signal: a
+    ``wire.TURN_SIGNALS`` code, 0 = off)."""
+    a = wire.WireAgent()
+    a.x, a.y, a.vx, a.vy, a.ax, a.ay = x, y, vx, vy, ax, ay
+    a.heading = wrap(heading)
+    a.intent = wire.WireIntent.unknown()
+    a.id, a.kind, a.turn_signal, a.valid = agent_id, 0, signal, 1
+    return a
+
+
+def agent_row(a):
+    """A wire agent as a trace row: [id, x, y, vx, vy, ax, ay, heading, turn signal], what
+    ``cargo run --example replay_trace`` reads back."""
+    return [a.id, a.x, a.y, a.vx, a.vy, a.ax, a.ay, a.heading, a.turn_signal]
+
+
 def agent(x, y, heading, speed, agent_id, kind=0):
     """A valid wire agent moving at ``speed`` along ``heading`` with no known intent."""
     a = wire.WireAgent()
@@ -112,7 +130,7 @@ def sample(decision, t):
         if pts[k].t >= t:
             a, b = pts[k - 1], pts[k]
             u = (t - a.t) / max(b.t - a.t, 1e-9)
-            turn = (b.heading - a.heading + math.pi) % (2.0 * math.pi) - math.pi
+            turn = wrap(b.heading - a.heading)
             return (a.x + (b.x - a.x) * u, a.y + (b.y - a.y) * u, a.heading + turn * u,
                     a.speed + (b.speed - a.speed) * u)
     p = pts[n - 1]

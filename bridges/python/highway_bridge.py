@@ -165,7 +165,7 @@ ROOT = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, HERE)
 
 import concord_wire as wire  # noqa: E402
-from concord_link import ConcordProcess, sample  # noqa: E402
+from concord_link import ConcordProcess, agent_row, sample, wire_agent  # noqa: E402
 from pet import PetGrid, wrap  # noqa: E402
 
 # Lane indices of the maps deploy/maps/highway-env-intersection.toml and
@@ -387,10 +387,6 @@ class Tracker:
         return out
 
 
-def _state(a):
-    return [a.id, a.x, a.y, a.vx, a.vy, a.ax, a.ay, a.heading, a.turn_signal]
-
-
 # Turn-signal codes of the wire.
 SIGNAL_OFF, SIGNAL_LEFT, SIGNAL_RIGHT = (wire.TURN_SIGNALS.index(n)
                                         for n in ("off", "left", "right"))
@@ -413,15 +409,6 @@ def turn_signal(heading, cos_d, sin_d):
     if angle > SIGNAL_ANGLE_RAD:
         return SIGNAL_RIGHT
     return SIGNAL_OFF
-
-
-def wire_agent(x, y, vx, vy, heading, agent_id, ax=0.0, ay=0.0, signal=SIGNAL_OFF):
-    a = wire.WireAgent()
-    a.x, a.y, a.vx, a.vy, a.ax, a.ay = x, y, vx, vy, ax, ay
-    a.heading = wrap(heading)
-    a.intent = wire.WireIntent.unknown()
-    a.id, a.kind, a.turn_signal, a.valid = agent_id, 0, signal, 1
-    return a
 
 
 def follow(decision, x, y, heading, speed, period, lookahead):
@@ -574,8 +561,8 @@ class ConcordPolicy:
             # Exact scene, for replaying it through the core:
             # [id, x, y, vx, vy, ax, ay, heading, turn signal].
             "scene": {"time": f.stamp_ns - self.origin_ns, "lane": f.ego_route_lane,
-                      "ego": _state(f.ego),
-                      "agents": [_state(a) for a in f.agents if a.valid]},
+                      "ego": agent_row(f.ego),
+                      "agents": [agent_row(a) for a in f.agents if a.valid]},
         }
         if request is not None:
             rec["ego_s"] = round(request.ego.s_m, 2)

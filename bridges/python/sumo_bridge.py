@@ -49,7 +49,7 @@ ROOT = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, HERE)
 
 import concord_wire as wire  # noqa: E402
-from concord_link import ConcordProcess, sample  # noqa: E402
+from concord_link import ConcordProcess, agent_row, sample, wire_agent  # noqa: E402
 from pet import PetGrid  # noqa: E402
 
 DEFAULT_NET = os.path.join(ROOT, "deploy", "maps", "sumo", "paper.net.xml")
@@ -101,15 +101,11 @@ def state(ls, vid):
             ls.vehicle.getWidth(vid), signal)
 
 
-def wire_agent(s, agent_id):
+def to_wire(s, agent_id):
+    """The wire agent of a vehicle's ``state``."""
     x, y, h, v, a, _, _, signal = s
-    w = wire.WireAgent()
     c, sn = math.cos(h), math.sin(h)
-    w.x, w.y, w.heading = x, y, h
-    w.vx, w.vy, w.ax, w.ay = v * c, v * sn, a * c, a * sn
-    w.intent = wire.WireIntent.unknown()
-    w.id, w.kind, w.turn_signal, w.valid = agent_id, 0, signal, 1
-    return w
+    return wire_agent(x, y, v * c, v * sn, h, agent_id, a * c, a * sn, signal)
 
 
 def add_traffic(ls, scenario, speed, rng):
@@ -172,9 +168,9 @@ class ConcordDriver:
         self.sequence += 1
         f.sequence = self.sequence
         f.stamp_ns = self.origin_ns + int(round(t * 1e9))
-        f.ego = wire_agent(ego, 0)
+        f.ego = to_wire(ego, 0)
         for k, (vid, s) in enumerate(others[:wire.MAX_AGENTS]):
-            f.agents[k] = wire_agent(s, self.ids.setdefault(vid, len(self.ids) + 1))
+            f.agents[k] = to_wire(s, self.ids.setdefault(vid, len(self.ids) + 1))
         self.core.link.publish_scene(f)
         d = self.core.link.wait_for_decision(f.sequence, timeout_s=self.timeout)
         if self.trace is not None:
@@ -193,16 +189,13 @@ class ConcordDriver:
     def write_trace(self, f, d, t):
         """One JSON line per frame: the decision and the exact scene, which ``cargo run
         --release --example replay_trace`` replays through the core (CONCORD_REPLAY_MAP)."""
-        def row(a):
-            return [a.id, a.x, a.y, a.vx, a.vy, a.ax, a.ay, a.heading, a.turn_signal]
-
         self.trace.write(json.dumps({
             "t": round(t, 3), "seq": f.sequence,
             "maneuver": None if d is None else wire.MANEUVERS[d.maneuver],
             "plan_v": [] if d is None else [round(d.trajectory[k].speed, 2)
                                             for k in (0, 10, 20, 30, 40, 50) if k < d.n_points],
-            "scene": {"time": f.stamp_ns - self.origin_ns, "lane": 0, "ego": row(f.ego),
-                      "agents": [row(a) for a in f.agents if a.valid]},
+            "scene": {"time": f.stamp_ns - self.origin_ns, "lane": 0, "ego": agent_row(f.ego),
+                      "agents": [agent_row(a) for a in f.agents if a.valid]},
         }) + "\n")
 
     def close(self):

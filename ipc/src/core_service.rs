@@ -126,12 +126,12 @@ impl ServiceConfig {
             Some(path) => {
                 Map::load_route(path, self.route.as_deref()).map_err(|e| e.to_string())?
             }
-            None => {
-                let map = self.geometry.built_in().map();
-                let lane = self.route.as_deref().map(|id| map.lane_index(id));
-                let lane = lane.transpose().map_err(route)?;
-                (map, lane)
-            }
+            None => self
+                .geometry
+                .built_in()
+                .map()
+                .with_route(self.route.as_deref())
+                .map_err(route)?,
         };
         Ok(Road { map, route_lane })
     }

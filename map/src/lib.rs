@@ -69,9 +69,13 @@ impl Map {
         if origin.ends_with(".net.xml") {
             return sumo::parse(&text, &origin, route);
         }
-        let map = Map::parse(&text, &origin)?;
-        let lane = route.map(|id| map.lane_index(id)).transpose()?;
-        Ok((map, lane))
+        Map::parse(&text, &origin)?.with_route(route)
+    }
+
+    /// The map and the index of the lane `route` names, if any.
+    pub fn with_route(self, route: Option<&str>) -> Result<(Map, Option<u8>), MapError> {
+        let lane = route.map(|id| self.lane_index(id)).transpose()?;
+        Ok((self, lane))
     }
 
     /// A map of `lanes` with their ids and successors (indices), checked against the core's
@@ -312,12 +316,6 @@ impl MapFile {
         let err = |msg: String| MapError(format!("map {origin}: {msg}"));
         if self.lanes.is_empty() {
             return Err(err("no [[lane]]".into()));
-        }
-        if self.lanes.len() > MAX_LANES {
-            return Err(err(format!(
-                "{} lanes, more than the core's capacity MAX_LANES = {MAX_LANES}",
-                self.lanes.len()
-            )));
         }
         let ids: Vec<String> = self.lanes.iter().map(|l| l.id.clone()).collect();
         for (i, id) in ids.iter().enumerate() {
