@@ -113,7 +113,7 @@ impl AdviceSource for LlmAdvisor {
         w: &World,
     ) -> Option<(concord_core::Maneuver, f64, f64)> {
         let request = AdviceRequest::from_core(
-            decision.cycle,
+            decision.request_id,
             decision.cycle,
             0,
             u64::MAX,
@@ -179,7 +179,7 @@ fn scenes(n: usize, seed: u64) -> Vec<Labelled> {
         }
         let core = cav.core();
         let request = AdviceRequest::from_core(
-            decision.cycle,
+            decision.request_id,
             seq,
             0,
             u64::MAX,

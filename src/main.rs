@@ -11,7 +11,7 @@ use std::time::Duration;
 use clap::{Parser, Subcommand, ValueEnum};
 use concord_core::AdviceVerdict;
 use concord_core::DecisionCore;
-use concord_ipc::core_service::{self, Geometry, RunConfig, StopAfter};
+use concord_ipc::core_service::{self, DecideOn, Geometry, RunConfig, StopAfter};
 use concord_ipc::feed::{self, Fault, FeedConfig, Scenario};
 use concord_ipc::wire::{
     AdviceFailure, Audience, CoreStats, EhmiMessage, IntentText, TextSource, WireDecision,
@@ -193,6 +193,10 @@ enum Command {
         /// The ego's route: a lane id of the map, overriding the file's `service.route`.
         #[arg(long)]
         route: Option<String>,
+        /// Decide as soon as a scene arrives (its publisher notifies `scene_ready`), not on the
+        /// tick: for lock-step simulators. Overrides the file's `service.decide_on`.
+        #[arg(long)]
+        on_arrival: bool,
         /// Stop after this many seconds (default: run until SIGINT/SIGTERM).
         #[arg(long, value_parser = seconds)]
         duration: Option<f64>,
@@ -319,11 +323,13 @@ fn main() -> ExitCode {
             geometry,
             map,
             route,
+            on_arrival,
             duration,
         } => run(
             config.as_deref(),
             prefix,
             rate,
+            on_arrival,
             RoadArgs {
                 geometry: geometry.map(GeometryArg::geometry),
                 map,
@@ -648,6 +654,7 @@ fn run(
     config: Option<&Path>,
     prefix: Option<String>,
     rate: Option<f64>,
+    on_arrival: bool,
     road: RoadArgs,
     duration: Option<f64>,
     iox_path: Option<&Path>,
@@ -669,11 +676,11 @@ fn run(
     if road.route.is_some() {
         cfg.service.route = road.route;
     }
+    if on_arrival {
+        cfg.service.decide_on = DecideOn::Arrival;
+    }
     cfg.validate()?;
     let loaded = cfg.service.road()?;
-    if let Some(note) = cfg.cover_advice_deadline() {
-        eprintln!("concord run: {note}");
-    }
     let iox_config = iox::init(iox_path).map_err(|e| e.to_string())?;
     let mut core =
         Box::new(DecisionCore::new(cfg.core, loaded.map.morphology()).map_err(|e| e.to_string())?);
@@ -682,8 +689,12 @@ fn run(
         _ => String::new(),
     };
     eprintln!(
-        "concord run: {} Hz on {}*, map {} ({} lanes, {} conflict points{route}), {} samples, staleness {} s",
+        "concord run: {} Hz{} on {}*, map {} ({} lanes, {} conflict points{route}), {} samples, staleness {} s",
         cfg.service.rate_hz,
+        match cfg.service.decide_on {
+            DecideOn::Arrival => ", deciding on arrival,",
+            DecideOn::Tick => "",
+        },
         cfg.service.prefix,
         loaded.map.name,
         loaded.map.ids().len(),

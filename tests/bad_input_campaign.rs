@@ -481,9 +481,8 @@ fn random_configuration_files_are_refused_by_key_or_run() {
         20_000,
         0xBAD3,
         |text| {
-            let mut cfg: RunConfig = toml::from_str(text).map_err(|e| e.to_string())?;
+            let cfg: RunConfig = toml::from_str(text).map_err(|e| e.to_string())?;
             cfg.validate()?;
-            cfg.cover_advice_deadline();
             let mut core = DecisionCore::new(cfg.core, cfg.service.geometry.morphology())
                 .map_err(|e| e.to_string())?;
             let s = good_frame(1, 1_000_000_000).to_scene().unwrap();

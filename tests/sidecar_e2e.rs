@@ -34,11 +34,7 @@ fn scenes_in_advice_intents_and_ehmi_text_out() {
     // This test checks the plumbing, not the model's speed: a 10 s advice deadline keeps it
     // meaningful on a loaded machine (the latency is measured by `advice_report`).
     let config = std::env::temp_dir().join(format!("concord-e2e-{}.toml", std::process::id()));
-    std::fs::write(
-        &config,
-        "[core.advice]\ndeadline_s = 10.0\nfreshness_cycles = 200\n",
-    )
-    .unwrap();
+    std::fs::write(&config, "[core.advice]\ndeadline_s = 10.0\n").unwrap();
     let args = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
     let mut core = Proc::start(
         &args(&[

@@ -41,8 +41,16 @@ def _service(node, name, payload):
             .open_or_create())
 
 
+def _event(node, name):
+    return node.service_builder(iox2.ServiceName.new(name)).event().open_or_create()
+
+
 class ConcordLink:
-    """Scene publisher and decision, eHMI and statistics subscribers under one prefix."""
+    """Scene publisher and decision, eHMI and statistics subscribers under one prefix.
+
+    Each scene also notifies ``scene_ready``, which wakes a core that decides on arrival
+    (``concord run --on-arrival``); such a core notifies ``decision_ready`` after each
+    decision, and ``wait_for_decision`` sleeps on that event instead of polling."""
 
     def __init__(self, prefix=wire.DEFAULT_PREFIX, node_name="concord-python"):
         iox2.set_log_level_from_env_or(iox2.LogLevel.Error)
@@ -51,9 +59,12 @@ class ConcordLink:
         self.decisions = _service(self.node, wire.service_name("decision", prefix), wire.WireDecision).subscriber_builder().buffer_size(MAX_BUFFER).create()
         self.stats = _service(self.node, wire.service_name("stats", prefix), wire.CoreStats).subscriber_builder().create()
         self.ehmi = _service(self.node, wire.service_name("ehmi", prefix), wire.EhmiMessage).subscriber_builder().buffer_size(8).create()
+        self.scene_ready = _event(self.node, wire.service_name("scene_ready", prefix)).notifier_builder().create()
+        self.decision_ready = _event(self.node, wire.service_name("decision_ready", prefix)).listener_builder().create()
 
     def publish_scene(self, frame):
         self.scene_publisher.send_copy(frame)
+        self.scene_ready.notify()
 
     @staticmethod
     def _drain(subscriber, payload_type):
@@ -80,14 +91,19 @@ class ConcordLink:
         return got[-1] if got else None
 
     def wait_for_decision(self, sequence, timeout_s=1.0):
-        """The decision answering scene ``sequence``, or None after ``timeout_s``."""
+        """The decision answering scene ``sequence``, or None after ``timeout_s``. A stale-scene
+        fallback carries the last valid frame's sequence: it is skipped by its code."""
         deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
+        while True:
             for d in self.decisions_received():
-                if d.scene_sequence == sequence and d.fallback != 2:
+                if d.scene_sequence == sequence and d.fallback != wire.FALLBACK_STALE_SCENE:
                     return d
-            time.sleep(0.001)
-        return None
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return None
+            # Woken by a core deciding on arrival; a core on its tick never notifies, so the
+            # wait is capped at 1 ms.
+            self.decision_ready.timed_wait(iox2.Duration.from_micros(int(min(left, 1e-3) * 1e6)))
 
 
 def wire_agent(x, y, vx, vy, heading, agent_id, ax=0.0, ay=0.0, signal=0):
@@ -139,15 +155,20 @@ def sample(decision, t):
 
 class ConcordProcess:
     """``concord run`` on a private prefix with ``road`` arguments (``["--geometry", name]`` or
-    ``["--map", file, "--route", id]``), and the link to it. The process is stopped by
+    ``["--map", file, "--route", id]``), and the link to it. It decides on each scene's
+    arrival (lock-step), unless ``on_arrival`` is false; ``rate`` is then the tick that
+    decides, else the one that only watches for staleness. The process is stopped by
     ``close``."""
 
     started = 0
 
-    def __init__(self, binary, road, rate, config=None, log=None, trace=False, tag="py"):
+    def __init__(self, binary, road, rate, config=None, log=None, trace=False, tag="py",
+                 on_arrival=True):
         ConcordProcess.started += 1
         self.prefix = f"{tag}-{os.getpid()}-{ConcordProcess.started}/"
         args = [binary, "run", "--prefix", self.prefix, *road, "--rate", str(rate)]
+        if on_arrival:
+            args.append("--on-arrival")
         if config:
             args += ["--config", config]
         self.log = open(log, "a", encoding="utf-8") if log else subprocess.DEVNULL

@@ -29,6 +29,7 @@ MANEUVERS = ("accelerate", "decelerate", "keep_speed", "turn_left", "turn_right"
 # DecisionSource, FallbackReason and AdviceVerdict codes.
 SOURCES = ("logit", "advice", "minimum_risk")
 FALLBACKS = ("none", "no_feasible_trajectory", "stale_scene", "not_finite")
+FALLBACK_STALE_SCENE = FALLBACKS.index("stale_scene")
 ADVICE_VERDICTS = ("no_advice", "accepted", "malformed", "unknown_request",
                    "low_confidence", "late", "navigation_inconsistent", "unsafe", "expired",
                    "implausible")

@@ -8,7 +8,9 @@
         --seed-list 0-99,500-599 --json ceiling.json                          # the oracle
     python highway_bridge.py --env intersection-v0 --seed-list 0-99,500-599 --ceiling ceiling.json
 
-Environments (``--env``): ``intersection-v0`` and ``merge-v0``, and ``intersection-v2`` and
+Environments (``--env``): ``intersection-v0``, ``intersection-v1`` (its own dynamical action
+kept), ``merge-v0`` and ``roundabout-v0`` (on a map built from its road network), and
+``intersection-v2`` and
 ``merge-v1``: highway-env's ``ConnectedLaneIntersectionEnv`` and ``ConnectedLaneMergeEnv``, the
 same roads, traffic, configuration and arrival rules as their v0 with highway-env 1.12's
 ``neighbour_vehicles_connected_lanes`` (a vehicle looking for its leader also searches the
@@ -65,6 +67,24 @@ as not arrived. merge-v0's reward cannot be computed for a ``ContinuousAction`` 
 out of the observations: it is part of the road, not traffic. The baselines' constant actions
 are looked up by name, since merge-v0's action space has the lane changes too (IDLE is 1 in
 both, FASTER and SLOWER are 3 and 4 in merge-v0).
+
+roundabout-v0. The core runs ``concord run --map deploy/maps/highway-env-roundabout.toml
+--route ego``, a map built from the environment's road network by ``highway_maps.py`` (every
+movement meeting the ego's route, first come first served: highway-env's roundabout has no
+right of way). The ego starts 55 m along its route on the south approach at 8 m/s and heads
+for the north exit; the episode ends on a collision or at the environment's 11 s. An episode
+counts as *arrived* when the ego has left the ring onto the north exit (y < -25.5) without a
+collision; highway-env's own success is the absence of a collision, which the collision rate
+gives. Turn signals are not sent: on a ring the direction to a car's destination turns as it
+circles and says little. roundabout-v0's reward rejects a continuous action as merge-v0's does
+(``continuous_safe``).
+
+intersection-v1. ``ContinuousIntersectionEnv``: intersection-v0's road and traffic, with its
+own action configuration kept (``ContinuousAction`` with a dynamical bicycle model: tyre
+friction and slip, accelerations within ±5 m/s², steering within ±60°). The bridge scales its
+commands to the environment's ranges (``ConcordPolicy.reset``) and reports the ego's velocity
+along its body, as observed, since the slip of that model follows from its tyre forces, not
+from the steering alone. The constant DiscreteMetaAction baselines do not apply to it.
 
 Scene time. Frames are stamped with the simulation clock (a fixed monotonic origin plus the
 episode's simulated time), not the wall clock: lock-step runs faster or slower than real time,
@@ -192,30 +212,81 @@ def merge_progress(x, y):
     return x
 
 
-def make_merge_env(config, connected_lanes=False):
-    """merge-v0 (``highway_env.envs.merge_env:MergeEnv``, as ``gym.make("merge-v0")`` builds it;
-    with ``connected_lanes``, merge-v1's ``ConnectedLaneMergeEnv``) with one fix: its
-    ``_rewards`` tests ``action in [0, 2]`` for the lane-change penalty, which raises for a
-    ``ContinuousAction`` array (already in ``reset``). A continuous action changes no lane, so
-    it is passed on as no action. Dynamics, traffic and termination are highway-env's; the
-    bridge does not use the reward."""
-    from highway_env.envs.merge_env import ConnectedLaneMergeEnv, MergeEnv
+def continuous_safe(base):
+    """``base`` with one fix: highway-env's ``_rewards`` of merge-v0 and roundabout-v0 test
+    ``action in [0, 2]`` for the lane-change penalty, which raises for a ``ContinuousAction``
+    array (already in ``reset``). A continuous action changes no lane, so it is passed on as
+    no action. Dynamics, traffic and termination are highway-env's; the bridge does not use
+    the reward."""
 
-    base = ConnectedLaneMergeEnv if connected_lanes else MergeEnv
-
-    class ContinuousSafeMergeEnv(base):
+    class ContinuousSafe(base):
         def _rewards(self, action):
             return super()._rewards(action if np.ndim(action) == 0 else None)
 
-    import gymnasium as gym
+    ContinuousSafe.__name__ = f"ContinuousSafe{base.__name__}"
+    return ContinuousSafe
 
-    return gym.wrappers.OrderEnforcing(ContinuousSafeMergeEnv(config=config))
+
+def make_merge_env(config, connected_lanes=False):
+    """merge-v0 (``highway_env.envs.merge_env:MergeEnv``, as ``gym.make("merge-v0")`` builds it;
+    with ``connected_lanes``, merge-v1's ``ConnectedLaneMergeEnv``), ``continuous_safe``."""
+    import gymnasium as gym
+    from highway_env.envs.merge_env import ConnectedLaneMergeEnv, MergeEnv
+
+    base = ConnectedLaneMergeEnv if connected_lanes else MergeEnv
+    return gym.wrappers.OrderEnforcing(continuous_safe(base)(config=config))
 
 
 def make_merge_v1_env(config):
     """merge-v1 (``ConnectedLaneMergeEnv``: merge-v0 with highway-env 1.12's
-    ``neighbour_vehicles_connected_lanes``), with ``make_merge_env``'s reward fix."""
+    ``neighbour_vehicles_connected_lanes``), with ``continuous_safe``'s reward fix."""
     return make_merge_env(config, connected_lanes=True)
+
+
+def make_roundabout_env(config):
+    """roundabout-v0 (``RoundaboutEnv``), ``continuous_safe``."""
+    import gymnasium as gym
+    from highway_env.envs.roundabout_env import RoundaboutEnv
+
+    return gym.wrappers.OrderEnforcing(continuous_safe(RoundaboutEnv)(config=config))
+
+
+# roundabout-v0's map, built from its road network by highway_maps.py; the ego's route is its
+# lane "ego" (index 0).
+ROUNDABOUT_MAP = os.path.join(ROOT, "deploy", "maps", "highway-env-roundabout.toml")
+# roundabout-v0's ego has left the ring once it is this far north (y < -25.5: on the north exit's
+# S-bend behind it, on its straight).
+ROUNDABOUT_EXIT_Y = -25.5
+
+
+def _route_polyline(path, lane_id):
+    import tomllib
+
+    with open(path, "rb") as f:
+        lanes = tomllib.load(f)["lane"]
+    return np.array(next(l["points"] for l in lanes if l["id"] == lane_id), dtype=float)
+
+
+_ROUNDABOUT_ROUTE = None
+
+
+def roundabout_progress(x, y):
+    """Arc length along the roundabout ego's route (its map lane), at the nearest point, m."""
+    global _ROUNDABOUT_ROUTE
+    if _ROUNDABOUT_ROUTE is None:
+        _ROUNDABOUT_ROUTE = _route_polyline(ROUNDABOUT_MAP, "ego")
+    pts = _ROUNDABOUT_ROUTE
+    seg = np.diff(pts, axis=0)
+    length = np.linalg.norm(seg, axis=1)
+    rel = np.array([x, y]) - pts[:-1]
+    u = np.clip(np.sum(rel * seg, axis=1) / np.maximum(length ** 2, 1e-12), 0.0, 1.0)
+    dist = np.linalg.norm(rel - seg * u[:, None], axis=1)
+    k = int(np.argmin(dist))
+    return float(np.sum(length[:k]) + u[k] * length[k])
+
+
+def roundabout_arrived(env):
+    return bool(env.vehicle.position[1] < ROUNDABOUT_EXIT_Y)
 
 
 def intersection_arrived(env):
@@ -237,7 +308,7 @@ def merge_arrived(env):
 # to its own when looking for its leader, so it no longer runs into a car just past a lane
 # boundary); the core's geometry and configuration are the same.
 _INTERSECTION = {
-    "geometry": "highway-env-intersection",
+    "road": ["--geometry", "highway-env-intersection"],
     "config": "highway-env.toml",
     "route_lane": HWI_EGO_LEFT,
     "progress": intersection_progress,
@@ -250,7 +321,7 @@ _INTERSECTION = {
     "scale_spawn": True,
 }
 _MERGE = {
-    "geometry": "highway-env-merge",
+    "road": ["--geometry", "highway-env-merge"],
     "config": "highway-env-merge.toml",
     "route_lane": HWM_EGO_RIGHT,
     "progress": merge_progress,
@@ -262,11 +333,31 @@ _MERGE = {
     "make": make_merge_env,
     "scale_spawn": False,
 }
+_ROUNDABOUT = {
+    "road": ["--map", ROUNDABOUT_MAP, "--route", "ego"],
+    "config": "highway-env.toml",
+    "route_lane": 0,
+    "progress": roundabout_progress,
+    "arrived": roundabout_arrived,
+    "max_speed": 16.0,  # the top of its DiscreteMetaAction target speeds
+    "time_limit_s": None,
+    "duration_s": 11.0,  # RoundaboutEnv's "duration"
+    "duration_in_config": True,
+    "make": make_roundabout_env,
+    "scale_spawn": False,  # no traffic spawns after the reset
+    # highway-env's destinations say little on a ring (the direction to an exit turns as a
+    # car circles): no turn signals.
+    "signals": False,
+}
 ENVS = {
     "intersection-v0": dict(_INTERSECTION),
+    # ContinuousIntersectionEnv: the same road and traffic, and its own action configuration
+    # kept (a dynamical bicycle model with tyre slip; see ``env_action``).
+    "intersection-v1": dict(_INTERSECTION, own_action=True),
     "intersection-v2": dict(_INTERSECTION),  # ConnectedLaneIntersectionEnv
     "merge-v0": dict(_MERGE),
     "merge-v1": dict(_MERGE, make=make_merge_v1_env),  # ConnectedLaneMergeEnv
+    "roundabout-v0": dict(_ROUNDABOUT),
 }
 
 
@@ -329,7 +420,7 @@ def env_config(policy, policy_frequency, spec=None):
         cfg["spawn_probability"] = 0.6 / policy_frequency
     if spec.get("duration_in_config"):
         cfg["duration"] = spec["duration_s"]
-    if policy == "concord":
+    if policy == "concord" and not spec.get("own_action"):
         cfg["action"] = {
             "type": "ContinuousAction",
             "longitudinal": True,
@@ -411,24 +502,26 @@ def turn_signal(heading, cos_d, sin_d):
     return SIGNAL_OFF
 
 
-def follow(decision, x, y, heading, speed, period, lookahead):
-    """Acceleration (m/s²) and steering (rad) that follow ``decision`` for one ``period``."""
+def follow(decision, x, y, heading, speed, period, lookahead, ranges=(ACCEL_RANGE, STEERING_RANGE)):
+    """Acceleration (m/s²) and steering (rad) that follow ``decision`` for one ``period``,
+    within ``ranges`` (the action's acceleration and steering ranges)."""
+    (a_lo, a_hi), (d_lo, d_hi) = ranges
     start, target = sample(decision, 0.0), sample(decision, period)
     if target is None:
-        return ACCEL_RANGE[0], 0.0
+        return a_lo, 0.0
     # The planned change of speed, not the gap to the planned speed: the plan's speed is
     # along the lane (Frenet ds), which is below the ego's speed whenever its course differs
     # from the lane's, and at short periods that gap would read as hard braking.
     accel = (target[3] - start[3]) / period
     accel = max(accel, -speed / period)  # stop at 0, never reverse
-    accel = min(max(accel, ACCEL_RANGE[0]), ACCEL_RANGE[1])
+    accel = min(max(accel, a_lo), a_hi)
     aim = sample(decision, max(period, lookahead))
     dx, dy = aim[0] - x, aim[1] - y
     dist = math.hypot(dx, dy)
     steering = 0.0
     if dist > 0.5:
         steering = math.atan(2.0 * math.tan(pursuit_slip(math.atan2(dy, dx) - heading, dist)))
-    steering = min(max(steering, STEERING_RANGE[0]), STEERING_RANGE[1])
+    steering = min(max(steering, d_lo), d_hi)
     return accel, steering
 
 
@@ -464,7 +557,7 @@ class ConcordPolicy:
     """One decision per environment step, in lock-step."""
 
     def __init__(self, args, spec, period):
-        self.core_args = (args.concord, ["--geometry", spec["geometry"]], args.rate,
+        self.core_args = (args.concord, spec["road"], args.rate,
                           args.config, args.core_log, bool(args.trace), "hw")
         self.restart = not args.keep_core
         self.core = ConcordProcess(*self.core_args)
@@ -474,17 +567,25 @@ class ConcordPolicy:
         self.lookahead = args.lookahead
         self.timeout = args.timeout
         self.estimate_accel = args.estimate_accel
-        self.signals = not args.no_turn_signals
+        self.signals = spec.get("signals", True) and not args.no_turn_signals
         self.tracker = Tracker()
         self.sequence = 0
         self.origin_ns = time.monotonic_ns()
         self.ego_accel = 0.0
         self.ego_steering = 0.0
+        self.ranges = (ACCEL_RANGE, STEERING_RANGE)
+        self.kinematic = True
 
-    def reset(self):
+    def reset(self, action_type=None):
         """A new episode. The core's Monte Carlo RNG is seeded with seed XOR cycle, so by default
         each episode gets a fresh core, and a seed's outcome does not depend on the seeds run
-        before it (``--keep-core`` keeps one core for the whole run)."""
+        before it (``--keep-core`` keeps one core for the whole run). ``action_type``: the
+        environment's ``ContinuousAction``, whose ranges the actions are scaled to (the
+        bridge's own, or an environment's that the bridge keeps, e.g. intersection-v1's)."""
+        if action_type is not None:
+            self.ranges = (tuple(action_type.acceleration_range),
+                           tuple(action_type.steering_range))
+            self.kinematic = not action_type.dynamical
         if self.restart and self.core is not None:
             self.core.close()
             self.core = None
@@ -508,8 +609,11 @@ class ConcordPolicy:
         # 9 m/s on the 13 m left turn), and every plan would start with that drift. The bridge
         # knows the steering it commanded, so it reports the true velocity (and acceleration)
         # direction; the heading stays the body's.
+        # A dynamical model's (intersection-v1's) slip follows from its tyre forces, not the
+        # steering alone: its velocity is reported along the body, as observed.
         speed = math.hypot(evx, evy)
-        course = eh + math.atan(0.5 * math.tan(self.ego_steering))
+        slip = math.atan(0.5 * math.tan(self.ego_steering)) if self.kinematic else 0.0
+        course = eh + slip
         evx, evy = speed * math.cos(course), speed * math.sin(course)
         f.ego = wire_agent(ex, ey, evx, evy, eh, 0,
                            self.ego_accel * math.cos(course), self.ego_accel * math.sin(course))
@@ -534,11 +638,11 @@ class ConcordPolicy:
         d = self.core.link.wait_for_decision(f.sequence, timeout_s=self.timeout)
         if d is None:
             return None, None
-        accel, steering = follow(d, x, y, h, v, self.period, self.lookahead)
+        accel, steering = follow(d, x, y, h, v, self.period, self.lookahead, self.ranges)
         self.ego_accel, self.ego_steering = accel, steering
         if self.trace:
             self.write_trace(f, d, sim_time, accel, steering)
-        return np.array([to_unit(accel, *ACCEL_RANGE), to_unit(steering, *STEERING_RANGE)],
+        return np.array([to_unit(accel, *self.ranges[0]), to_unit(steering, *self.ranges[1])],
                         dtype=np.float32), d
 
     def write_trace(self, f, d, sim_time, accel, steering):
@@ -802,7 +906,7 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
     obs, _ = env.reset(seed=seed)
     u = env.unwrapped
     if name == "concord":
-        policy.reset()
+        policy.reset(u.action_type)
     speeds, min_risk, decisions, steps, timed_out = [], 0, 0, 0, False
     maneuvers = {}
     crashed = arrived = False
@@ -1083,6 +1187,9 @@ def main(argv=None):
     ap.add_argument("--verbose", action="store_true")
     args = ap.parse_args(argv)
     spec = with_duration(ENVS[args.env], args.duration)
+    if args.policy != "concord" and spec.get("own_action"):
+        ap.error(f"{args.env} keeps its own continuous action: the constant DiscreteMetaAction "
+                 "baselines do not apply to it")
     seeds = (parse_seeds(args.seed_list) if args.seed_list
              else list(range(args.first_seed, args.first_seed + args.seeds)))
     if args.oracle_ceiling:

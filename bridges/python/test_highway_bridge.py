@@ -2,8 +2,9 @@
 
 Needs the packages of requirements.txt (highway-env, iceoryx2) and a built `concord` binary
 ($CONCORD_BIN, default target/debug/concord). Runs the bridge's command line for two seeds of
-intersection-v0 (about 20 s), one seed of merge-v0 (a few seconds) and one seed of a baseline,
-which needs no core.
+intersection-v0 (about 20 s), one seed each of merge-v0, roundabout-v0 (on the map
+highway_maps.py builds, which must rebuild the shipped file exactly) and intersection-v1 (its
+own dynamical action kept), and one seed of a baseline, which needs no core.
 
 Without Concord (constant DiscreteMetaAction baselines, about a minute in all): intersection-v2
 and merge-v1 in lock-step, --duration, the per-episode outcome kind, standing time and other
@@ -243,6 +244,125 @@ class HighwayBridge(unittest.TestCase):
         self.assertAlmostEqual(e["sim_time_s"], 3.0, delta=1e-6)
 
 
+class Roundabout(unittest.TestCase):
+    """roundabout-v0 on the map built from its road network, and intersection-v1 with its own
+    action configuration."""
+
+    def test_the_shipped_map_is_what_highway_maps_builds(self):
+        with tempfile.TemporaryDirectory() as tmp:
+            out = os.path.join(tmp, "roundabout.toml")
+            subprocess.run([sys.executable, "-W", "ignore", os.path.join(HERE, "highway_maps.py"),
+                            "roundabout", "--out", out], cwd=HERE, check=True,
+                           capture_output=True, timeout=120)
+            with open(out, encoding="utf-8") as f:
+                built = f.read()
+        with open(os.path.join(ROOT, "deploy", "maps", "highway-env-roundabout.toml"),
+                  encoding="utf-8") as f:
+            self.assertEqual(built, f.read(), "rerun highway_maps.py roundabout")
+
+    def test_connectors_bridge_highway_envs_gaps_smoothly(self):
+        sys.path.insert(0, HERE)
+        import highway_maps as hm
+
+        lanes = {lane["id"]: lane for lane in hm.build("roundabout")}
+        for lane_id, lane in lanes.items():
+            d = np.diff(lane["points"], axis=0)
+            steps = np.linalg.norm(d, axis=1)
+            self.assertGreater(steps.min(), 0.9, lane_id)  # no vertices on top of each other
+            h = np.arctan2(d[:, 1], d[:, 0])
+            turns = np.abs(np.angle(np.exp(1j * np.diff(h))))
+            # No corner where highway-env's lanes leave a gap (a straight connector turns by
+            # 26°): the sharpest turns are the 4 m chords of the 20 m ring, 11.5°, and no
+            # stretch is tighter than a radius of 12 m.
+            self.assertLess(np.degrees(turns.max()), 13.0, lane_id)
+            self.assertLess((turns / np.minimum(steps[1:], steps[:-1])).max(), 1 / 12.0, lane_id)
+        # Movements through one ring lane share its vertices exactly: the ego's path after the
+        # merge is the outer ring's.
+        ego = {tuple(p) for p in lanes["ego"]["points"]}
+        ring = {tuple(p) for p in lanes["ring_outer_north"]["points"]}
+        self.assertGreaterEqual(len(ego & ring), 10)
+
+    def test_concord_drives_a_roundabout_v0_seed(self):
+        self.assertTrue(os.path.exists(CONCORD), f"build concord first: {CONCORD}")
+        stdout, result = run_bridge("--policy", "concord", "--seeds", "1", "--concord", CONCORD,
+                                    env="roundabout-v0")
+        s = self.check_summary(stdout, result, "concord", 1, env="roundabout-v0", top=16.0)
+        self.assertEqual(s["timeouts"], 0, stdout)
+        e = result["episodes"][0]
+        self.assertEqual(e["decisions"], e["steps"])
+        # Seed 0 (tuning): the ego starts 55 m along its route, enters the ring at about 75 m
+        # and drives round it without a collision.
+        self.assertFalse(e["crashed"], e)
+        self.assertGreater(e["final_progress_m"], 100.0, e)
+        self.assertLess(math.hypot(*e["final_position"]), 26.0, e)
+        self.assertEqual(e["arrived"], e["final_position"][1] < -25.5)
+
+    def test_concord_keeps_intersection_v1s_dynamical_action(self):
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+
+        spec = hb.with_duration(hb.ENVS["intersection-v1"], None)
+        self.assertNotIn("action", hb.env_config("concord", 5, spec))
+        env = hb.make_env("intersection-v1", "concord", 5, spec)
+        try:
+            env.reset(seed=0)
+            a = env.unwrapped.action_type
+            self.assertTrue(a.dynamical)
+            self.assertEqual(tuple(a.acceleration_range), (-5.0, 5.0))
+            self.assertEqual(type(env.unwrapped.vehicle).__name__, "BicycleVehicle")
+        finally:
+            env.close()
+        self.assertTrue(os.path.exists(CONCORD), f"build concord first: {CONCORD}")
+        stdout, result = run_bridge("--policy", "concord", "--seeds", "1", "--duration", "4",
+                                    "--concord", CONCORD, env="intersection-v1")
+        e = result["episodes"][0]
+        self.assertEqual(result["summary"]["timeouts"], 0, stdout)
+        self.assertEqual(e["decisions"], e["steps"])
+        # The ego drives up its approach (x = 2, towards -y) along the planned path.
+        self.assertAlmostEqual(e["final_position"][0], 2.0, delta=0.5)
+        self.assertLess(e["final_position"][1], 30.0)
+
+    def test_the_intersection_map_lies_on_highway_envs_lanes(self):
+        """intersection-v0/v1/v2's map (``deploy/maps/highway-env-intersection.toml``) was
+        written before highway_maps.py; it is held to highway-env's road network instead: the
+        polyline the core loads lies on the centre lines of the lanes its comment names (every
+        0.5 m, within 2 cm: 1 m chords of the 13 m arc sag by 1 cm), from the first lane's start to the last
+        one's end, with the stop line where the approach lane ends."""
+        import gymnasium as gym
+        import highway_env  # noqa: F401
+
+        path = os.path.join(ROOT, "deploy", "maps", "highway-env-intersection.toml")
+        loaded = json.loads(subprocess.run([CONCORD, "map", path, "--json"], check=True,
+                                           capture_output=True, text=True).stdout)
+        with open(path, encoding="utf-8") as f:
+            routes = re.findall(r'^id = "(\w+)"  # ([\w →]+?):', f.read(), re.M)
+        self.assertEqual(len(routes), len(loaded["lanes"]))
+        env = gym.make("intersection-v0")
+        try:
+            env.reset(seed=0)
+            net = env.unwrapped.road.network
+            for (lane_id, route), lane in zip(routes, loaded["lanes"]):
+                self.assertEqual(lane["id"], lane_id)
+                nodes = route.split(" → ")
+                hw = [net.get_lane((a, b, 0)) for a, b in zip(nodes, nodes[1:])]
+                pts = np.array(lane["points"])
+                for a, b in zip(pts, pts[1:]):
+                    for w in np.linspace(0.0, 1.0, int(np.linalg.norm(b - a) / 0.5) + 2):
+                        p = a + w * (b - a)
+                        off = min(abs(c[1]) if -0.01 <= c[0] <= l.length + 0.01 else math.inf
+                                  for l in hw for c in [l.local_coordinates(p)])
+                        self.assertLess(off, 0.02, f"{lane_id}: {p} between {a} and {b}")
+                self.assertLess(np.linalg.norm(np.array(lane["points"][0]) - hw[0].position(0, 0)),
+                                0.01, lane_id)
+                self.assertLess(np.linalg.norm(np.array(lane["points"][-1])
+                                               - hw[-1].position(hw[-1].length, 0)), 0.01, lane_id)
+                self.assertAlmostEqual(lane["stop_s_m"], hw[0].length, delta=0.01, msg=lane_id)
+        finally:
+            env.close()
+
+    check_summary = HighwayBridge.check_summary
+
+
 class Environments(unittest.TestCase):
     """The v1/v2 variants are highway-env's connected-lane classes with the v0 settings."""
 
@@ -267,8 +387,7 @@ class Environments(unittest.TestCase):
                 self.assertEqual(type(u.action_type).__name__, "ContinuousAction")
             finally:
                 env.close()
-        self.assertEqual(hb.ENVS["intersection-v2"]["geometry"],
-                         hb.ENVS["intersection-v0"]["geometry"])
+        self.assertEqual(hb.ENVS["intersection-v2"]["road"], hb.ENVS["intersection-v0"]["road"])
         self.assertEqual(hb.ENVS["merge-v1"]["time_limit_s"], 40.0)
         spec = hb.with_duration(hb.ENVS["intersection-v2"], 20)
         self.assertEqual(hb.env_config("concord", 5, spec)["duration"], 20.0)

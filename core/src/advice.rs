@@ -1,5 +1,5 @@
 //! The gate on the LLM's recommendation A_final (eq. 16). Advice replaces the logit choice only
-//! when it answers a request issued in the last N cycles, its confidence is ≥ 0.7, it was
+//! when it answers a request still in the request log, its confidence is ≥ 0.7, it was
 //! published before that request's deadline, the corrected logit keeps the maneuver plausible
 //! (P_n ≥ `prune_below`: the advice refines the choice, it does not override it), and the
 //! maneuver passes the core's own navigation and safety checks. Otherwise the logit choice
@@ -12,8 +12,14 @@ use crate::choice::{Maneuver, MANEUVERS};
 use crate::params::AdviceParams;
 use crate::scene::Turn;
 
-/// Capacity of the request log; `freshness_cycles` may not exceed it.
+/// Capacity of the request log. The core issues a request at most every
+/// `0.9 × advice.request_period_s`, so the log spans at least that times `MAX_PENDING − 1` in
+/// time, whatever the loop rate; `Params::validate` holds `advice.deadline_s` within it.
 pub const MAX_PENDING: usize = 256;
+
+/// Share of `advice.request_period_s` after which the next request is due (a tick's jitter
+/// does not skip one).
+pub const REQUEST_DUE_SHARE: f64 = 0.9;
 
 /// Advice as received from the sidecar, with the sidecar's publish stamp.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -41,7 +47,7 @@ pub enum AdviceVerdict {
     /// outside [0, 1], or a publish stamp that is not finite, lies in the future, or precedes
     /// its request.
     Malformed = 2,
-    /// Answers no request of the last N cycles (stale, or never issued).
+    /// Answers no request in the log (one of the last 256, or never issued).
     UnknownRequest = 3,
     /// Confidence below the threshold.
     LowConfidence = 4,
@@ -89,36 +95,56 @@ impl AdviceVerdict {
     }
 }
 
-/// Issue times of the last [`MAX_PENDING`] requests; request id = cycle number (from 1).
+/// The last [`MAX_PENDING`] advice requests: id (the cycle that issued it) and issue time.
 #[derive(Clone, Copy, Debug)]
 pub struct RequestLog {
+    ids: [u64; MAX_PENDING],
     issued_at_s: [f64; MAX_PENDING],
+    /// Slot the next request goes to.
+    next: usize,
     /// Id of the newest request, 0 before the first.
     pub latest: u64,
+    latest_at_s: f64,
 }
 
 impl Default for RequestLog {
     fn default() -> Self {
         RequestLog {
+            ids: [0; MAX_PENDING],
             issued_at_s: [f64::NAN; MAX_PENDING],
+            next: 0,
             latest: 0,
+            latest_at_s: f64::NEG_INFINITY,
         }
     }
 }
 
 impl RequestLog {
-    /// Issues the request of `cycle` at time `now`.
-    pub fn issue(&mut self, cycle: u64, now: f64) {
-        self.issued_at_s[(cycle % MAX_PENDING as u64) as usize] = now;
-        self.latest = cycle;
+    /// Whether a request is due at `now`: none yet, or `REQUEST_DUE_SHARE × period_s` since
+    /// the newest (or the clock went back), s.
+    pub fn due(&self, now: f64, period_s: f64) -> bool {
+        !(now - self.latest_at_s < REQUEST_DUE_SHARE * period_s && now >= self.latest_at_s)
     }
-    /// Issue time of request `id` if it is among the last `window` requests.
-    pub fn issued_at(&self, id: u64, window: u32) -> Option<f64> {
-        if id == 0 || id > self.latest || self.latest - id >= window.min(MAX_PENDING as u32) as u64
-        {
+    /// Logs request `id` (greater than every id logged before) issued at `now`.
+    pub fn issue(&mut self, id: u64, now: f64) {
+        self.ids[self.next] = id;
+        self.issued_at_s[self.next] = now;
+        self.next = (self.next + 1) % MAX_PENDING;
+        self.latest = id;
+        self.latest_at_s = now;
+    }
+    /// Issue time of request `id` while it is among the last [`MAX_PENDING`] requests.
+    pub fn issued_at(&self, id: u64) -> Option<f64> {
+        if id == 0 || id > self.latest {
             return None;
         }
-        Some(self.issued_at_s[(id % MAX_PENDING as u64) as usize])
+        // Newest first; ids only grow, so the search ends at the first smaller one.
+        (1..=MAX_PENDING)
+            .map(|back| (self.next + MAX_PENDING - back) % MAX_PENDING)
+            .map(|slot| (self.ids[slot], self.issued_at_s[slot]))
+            .take_while(|&(logged, _)| logged >= id)
+            .find(|&(logged, _)| logged == id)
+            .map(|(_, at)| at)
     }
 }
 
@@ -148,7 +174,7 @@ pub fn pre_check(
     }
     let issued = g
         .log
-        .issued_at(advice.request_id, p.freshness_cycles)
+        .issued_at(advice.request_id)
         .ok_or(AdviceVerdict::UnknownRequest)?;
     if published < issued {
         return Err(AdviceVerdict::Malformed);

@@ -109,8 +109,11 @@ pub enum Announcement {
 /// One decision of the core.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Decision {
-    /// Cycle number; it is also the id of the advice request this cycle issues.
+    /// Cycle number; it is also the id of the advice request a cycle issues.
     pub cycle: u64,
+    /// Id of the newest advice request: `cycle` when this cycle issued one (at most every
+    /// `advice.request_period_s`), else an earlier cycle's; 0 before the first.
+    pub request_id: u64,
     /// Timestamp of the scene it answers, s.
     pub scene_time_s: f64,
     /// The executed maneuver.
@@ -270,8 +273,10 @@ impl DecisionCore {
         self.last_scene_time_s = scene.time_s;
         self.cycle += 1;
         self.ego_lane = scene.ego_lane;
-        self.requests.issue(self.cycle, now);
         let p = self.params;
+        if self.requests.due(now, p.advice.request_period_s) {
+            self.requests.issue(self.cycle, now);
+        }
 
         self.history.record(scene.time_s, scene.agents());
         for (i, a) in scene.agents().iter().enumerate() {
@@ -347,6 +352,7 @@ impl DecisionCore {
 
         let mut decision = Decision {
             cycle: self.cycle,
+            request_id: self.requests.latest,
             scene_time_s: scene.time_s,
             logit_maneuver: self.choice.choice,
             p_logit: self.choice.p_logit,
@@ -628,6 +634,7 @@ impl DecisionCore {
         let stop = self.yield_point(q.s, q.speed.max(0.0)).0;
         let mut d = Decision {
             cycle: self.last.cycle,
+            request_id: self.last.request_id,
             scene_time_s: self.last.scene_time_s,
             maneuver: Maneuver::Decelerate,
             logit_maneuver: self.last.logit_maneuver,

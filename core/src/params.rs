@@ -242,8 +242,10 @@ impl Default for InteractionParams {
 #[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AdviceParams {
-    /// Advice must answer a request issued in the last N cycles.
-    pub freshness_cycles: u32,
+    /// The core issues an advice request at most this often, s: with every decision at this
+    /// period or slower, and with the first decision after 90 % of it at faster loop rates.
+    /// The request log then spans `deadline_s` at any rate (`advice::MAX_PENDING`).
+    pub request_period_s: f64,
     /// Smallest confidence accepted (0.7, §4.3).
     pub confidence_min: f64,
     /// Time after a request's issue by which its answer must be published, s.
@@ -256,7 +258,7 @@ pub struct AdviceParams {
 impl Default for AdviceParams {
     fn default() -> Self {
         Self {
-            freshness_cycles: 40,
+            request_period_s: 0.05,
             confidence_min: 0.7,
             deadline_s: 1.5,
             prune_below: 0.1,
@@ -601,6 +603,7 @@ impl Params {
             ),
             ("advice.confidence_min", a.confidence_min, 0.0, 1.0),
             ("advice.deadline_s", a.deadline_s, TINY, 60.0),
+            ("advice.request_period_s", a.request_period_s, TINY, 60.0),
             ("advice.prune_below", a.prune_below, 0.0, 1.0),
             ("trajectory.horizon_s", t.horizon_s, TINY, 60.0),
             ("trajectory.dt_s", t.dt_s, TINY, 1.0),
@@ -736,10 +739,16 @@ impl Params {
                 "need proceed_min_speed_mps <= proceed_top_speed_mps",
             );
         }
-        if self.advice.freshness_cycles == 0
-            || self.advice.freshness_cycles as usize > crate::advice::MAX_PENDING
-        {
-            return bad("advice.freshness_cycles", "must be in 1..=256");
+        let a = &self.advice;
+        let log_span_s = crate::advice::REQUEST_DUE_SHARE
+            * a.request_period_s
+            * (crate::advice::MAX_PENDING - 1) as f64;
+        if a.deadline_s > log_span_s {
+            return bad(
+                "advice.request_period_s",
+                "the request log (256 requests at 0.9 request_period_s apart) must span \
+                 advice.deadline_s: need request_period_s >= deadline_s / 229.5",
+            );
         }
         if t.emergency_brake_mps2 < t.max_brake_mps2 {
             return bad(

@@ -290,7 +290,7 @@ fn maneuver_names_are_distinct_snake_case() {
 fn eq16_gate_checks_in_order() {
     let p = AdviceParams::default();
     let mut log = RequestLog::default();
-    for cycle in 1..=50 {
+    for cycle in 1..=300 {
         log.issue(cycle, cycle as f64 * 0.05);
     }
     let advice = |id, conf, at| Advice {
@@ -319,12 +319,12 @@ fn eq16_gate_checks_in_order() {
     );
     let unknown = AdviceVerdict::UnknownRequest;
     assert_eq!(
-        verdict(&advice(5, 0.9, 2.5), 2.5),
+        verdict(&advice(44, 0.9, 2.5), 2.5),
         unknown,
-        "older than 40 cycles"
+        "pushed out of the log by 256 newer requests"
     );
     assert_eq!(
-        verdict(&advice(51, 0.9, 2.5), 2.5),
+        verdict(&advice(301, 0.9, 2.5), 2.5),
         unknown,
         "not issued yet"
     );
@@ -1621,4 +1621,23 @@ fn a_follower_in_the_egos_lane_puts_no_box_in_its_way_but_a_car_ahead_does() {
     assert!((0..50).all(|step| behind.occupancy.boxes(step).next().is_none()));
     let (ahead, _) = planner_with(&[car(30.0)], 10.0, 8.0, 0.0);
     assert!(ahead.occupancy.boxes(0).next().is_some());
+}
+
+/// The request log holds requests, not cycles: ids between two requests are unknown, and a
+/// request is due after 90 % of `request_period_s` (or when the clock goes back).
+#[test]
+fn request_log_keeps_requests_by_time() {
+    let mut log = RequestLog::default();
+    assert!(log.due(0.0, 0.05));
+    for cycle in [1, 4, 7] {
+        log.issue(cycle, cycle as f64 * 0.01);
+    }
+    assert_eq!(log.issued_at(4), Some(0.04));
+    assert_eq!(log.issued_at(7), Some(0.07));
+    for never in [0, 3, 5, 8] {
+        assert_eq!(log.issued_at(never), None, "request {never}");
+    }
+    assert!(!log.due(0.07 + 0.044, 0.05));
+    assert!(log.due(0.07 + 0.046, 0.05));
+    assert!(log.due(0.01, 0.05), "the clock went back");
 }

@@ -2,7 +2,7 @@
 mod common;
 
 use common::*;
-use concord_core::advice::{gate, Advice, AdviceVerdict, GateContext, RequestLog};
+use concord_core::advice::{gate, Advice, AdviceVerdict, GateContext, RequestLog, MAX_PENDING};
 use concord_core::choice::Maneuver;
 use concord_core::opm::{delta_ttc, guarded_ttc};
 use concord_core::params::{AdviceParams, OpmParams};
@@ -165,7 +165,7 @@ proptest! {
     /// ids are fresh and stale in equal shares.
     #[test]
     fn gate_accepts_exactly_when_every_condition_holds(
-        latest in 1u64..500, fresh: bool, back in 0u64..1000,
+        latest in 1u64..500, stride in 1u64..4, fresh: bool, back in 0u64..1000,
         conf in prop_oneof![3 => 0.7..=1.0f64, 1 => -0.2..1.2f64],
         delay in prop_oneof![1 => 0.0..1.5f64, 1 => -1.0..3.0f64],
         maneuver in 0u8..5, route in 0u8..3, safe in prop::bool::weighted(0.85),
@@ -174,21 +174,25 @@ proptest! {
         pn in prop_oneof![3 => 0.1..1.0f64, 1 => 0.0..0.3f64],
     ) {
         let p = AdviceParams::default();
-        let window = p.freshness_cycles as u64;
+        // Requests every `stride` cycles; the log keeps the newest MAX_PENDING of them.
+        let window = MAX_PENDING as u64;
         let mut log = RequestLog::default();
-        for c in 1..=latest { log.issue(c, c as f64 * 0.05); }
-        // Fresh and stale ids in equal shares; stale: never issued (0 or later) or too old.
-        let id = if fresh {
+        for c in 1..=latest { log.issue(c * stride, c as f64 * 0.05); }
+        // Fresh and stale ids in equal shares; stale: never issued (0, later, or between two
+        // requests) or pushed out of the log.
+        let c = if fresh {
             latest - back % window.min(latest)
         } else {
-            match back % 3 { 0 => 0, 1 => latest + 1 + back, _ => latest.saturating_sub(window + back % 100) }
+            match back % 4 { 0 => 0, 1 => latest + 1 + back, 2 => latest.saturating_sub(window + back % 100), _ => latest - back % latest }
         };
-        prop_assert_eq!(fresh, id >= 1 && id <= latest && latest - id < window);
+        let id = if !fresh && back % 4 == 3 && stride > 1 { c * stride - 1 } else { c * stride };
+        let fresh = fresh || (back % 4 == 3 && stride == 1 && latest - c < window);
+        prop_assert_eq!(fresh, c >= 1 && c <= latest && latest - c < window && id % stride == 0);
         let route = [Turn::Straight, Turn::Left, Turn::Right][route as usize];
         let m = Maneuver::try_from(maneuver).unwrap();
         let mut pc = [0.2; 5];
         pc[m.index()] = pn;
-        let issued = id as f64 * 0.05;
+        let issued = c as f64 * 0.05;
         let advice = Advice { request_id: id, maneuver: m, confidence: if nan { f64::NAN } else { conf }, published_at_s: issued + delay };
         let now = advice.published_at_s + wait;
         let g = GateContext { log: &log, route, now, first_look, p_corrected: &pc };

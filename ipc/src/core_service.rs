@@ -1,14 +1,20 @@
 //! The onboard core process: a fixed-rate loop (iceoryx2 WaitSet interval) that takes the
 //! newest scene, runs the decision core on it, and publishes the decision and an advice request.
+//! With `decide_on = "arrival"` it also wakes on the `scene_ready` event and decides at once,
+//! for lock-step simulators; the interval then only watches for staleness.
 //!
 //! Each tick: drain `scene` (newest wins) and `advice`; check the frame's sequence and codes;
-//! step the core (which checks every number); publish `decision` and, every
-//! `request_every` decisions, `advice_request`. With no valid scene for `staleness_s`, every
-//! tick publishes the minimum-risk fallback. Concord's code on this path does not allocate:
-//! ports, buffers and histograms are set up before the loop (iceoryx2 0.10 itself allocates a
-//! 48-byte state per loaned sample; `ipc/tests/loop_allocations.rs`). Counters and latency
-//! percentiles go out on `stats`
-//! every `stats_period_s` and to stderr every `print_period_s` and on exit.
+//! step the core (which checks every number); publish `decision` and, for every
+//! `request_every`-th request the core issues (at most every `advice.request_period_s`),
+//! `advice_request`. With no valid scene for `staleness_s`, every tick publishes the
+//! minimum-risk fallback: it carries the last valid frame's `scene_sequence` and
+//! `fallback = stale_scene`, so a client matching decisions to frames skips it by that code.
+//!
+//! Concord's code on this path does not allocate: ports, buffers and histograms are set up
+//! before the loop (iceoryx2 0.10 itself allocates a 48-byte state per loaned sample, and two
+//! small `Vec`s when a notification wakes the WaitSet; `ipc/tests/loop_allocations.rs`).
+//! Counters and latency percentiles go out on `stats` every `stats_period_s` and to stderr
+//! every `print_period_s` and on exit.
 
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -21,6 +27,7 @@ use concord_core::{Advice, AdviceVerdict, DecisionCore, FallbackReason, Params};
 use concord_map::{BuiltIn, Map, MapError};
 use hdrhistogram::Histogram;
 use iceoryx2::config::Config;
+use iceoryx2::port::listener::Listener;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
@@ -63,6 +70,19 @@ impl Geometry {
     }
 }
 
+/// What wakes the core to decide.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DecideOn {
+    /// Every period of `rate_hz` (a live perception feed).
+    #[default]
+    Tick,
+    /// As soon as a scene publisher notifies `scene_ready` (lock-step simulators); the core
+    /// then notifies `decision_ready` after each decision. The `rate_hz` tick still checks
+    /// staleness and statistics.
+    Arrival,
+}
+
 /// The road the core drives on: a map, and the ego's route lane when one is configured.
 #[derive(Debug, Clone)]
 pub struct Road {
@@ -79,9 +99,12 @@ pub struct ServiceConfig {
     pub prefix: String,
     /// Loop rate, Hz.
     pub rate_hz: f64,
+    /// What wakes the core to decide: its tick, or each scene's arrival.
+    pub decide_on: DecideOn,
     /// After this long without a valid scene the minimum-risk fallback applies, s.
     pub staleness_s: f64,
-    /// Issue an advice request with every n-th decision (0: never).
+    /// Publish every n-th advice request the core issues (0: never); the core issues one at
+    /// most every `core.advice.request_period_s`.
     pub request_every: u32,
     /// Period of `stats` messages, s.
     pub stats_period_s: f64,
@@ -106,6 +129,7 @@ impl Default for ServiceConfig {
         ServiceConfig {
             prefix: services::DEFAULT_PREFIX.into(),
             rate_hz: 20.0,
+            decide_on: DecideOn::Tick,
             staleness_s: 0.3,
             request_every: 1,
             stats_period_s: 1.0,
@@ -186,40 +210,7 @@ impl RunConfig {
         {
             return Err(format!("realtime.fifo_priority = {p}: expected 1 to 99"));
         }
-        self.core.validate().map_err(|e| format!("core: {e}"))?;
-        let needed = self.freshness_needed();
-        if needed > concord_core::advice::MAX_PENDING as u32 {
-            return Err(format!(
-                "core.advice.deadline_s = {} s at service.rate_hz = {} Hz spans {needed} cycles, \
-                 more than the {} requests the core remembers",
-                self.core.advice.deadline_s,
-                s.rate_hz,
-                concord_core::advice::MAX_PENDING
-            ));
-        }
-        Ok(())
-    }
-
-    /// Cycles the advice deadline spans at the loop rate: `core.advice.freshness_cycles` must
-    /// be at least this, or in-time answers would count as unknown requests.
-    fn freshness_needed(&self) -> u32 {
-        (self.core.advice.deadline_s * self.service.rate_hz).ceil() as u32
-    }
-
-    /// Raises `core.advice.freshness_cycles` to cover the advice deadline at the loop rate (a
-    /// faster `--rate` than the file's shortens the window); says so when it does.
-    pub fn cover_advice_deadline(&mut self) -> Option<String> {
-        let needed = self.freshness_needed();
-        let f = &mut self.core.advice.freshness_cycles;
-        (*f < needed).then(|| {
-            let note = format!(
-                "core.advice.freshness_cycles raised from {f} to {needed} to cover \
-                 advice.deadline_s = {} s at {} Hz",
-                self.core.advice.deadline_s, self.service.rate_hz
-            );
-            *f = needed;
-            note
-        })
+        self.core.validate().map_err(|e| format!("core: {e}"))
     }
 }
 
@@ -273,6 +264,8 @@ struct Ports {
     decision: Publisher<ipc::Service, WireDecision, ()>,
     request: Publisher<ipc::Service, AdviceRequest, ()>,
     stats: Publisher<ipc::Service, CoreStats, ()>,
+    /// With `DecideOn::Arrival`: wakes the clients after each decision.
+    decision_ready: Option<iceoryx2::port::notifier::Notifier<ipc::Service>>,
 }
 
 struct Loop<'a> {
@@ -300,7 +293,7 @@ struct Loop<'a> {
     intents: LanguageIntents,
     /// Negotiation phase of the last decision published.
     last_phase: Phase,
-    decisions_since_request: u32,
+    requests_since_publish: u32,
     publish_failures: u64,
 }
 
@@ -340,6 +333,15 @@ pub fn run_observed(
         decision: iox::publisher(&node, &name(services::DECISION))?,
         request: iox::publisher(&node, &name(services::ADVICE_REQUEST))?,
         stats: iox::publisher(&node, &name(services::STATS))?,
+        decision_ready: match cfg.decide_on {
+            DecideOn::Arrival => Some(iox::notifier(&node, &name(services::DECISION_READY))?),
+            DecideOn::Tick => None,
+        },
+    };
+    // With `DecideOn::Arrival`: woken by scene publishers.
+    let scene_ready: Option<Listener<ipc::Service>> = match cfg.decide_on {
+        DecideOn::Arrival => Some(iox::listener(&node, &name(services::SCENE_READY))?),
+        DecideOn::Tick => None,
     };
     for refusal in apply_realtime(rt) {
         eprintln!("concord run: WARNING: {refusal}; the loop runs without it");
@@ -372,7 +374,7 @@ pub fn run_observed(
         advice: None,
         intents: LanguageIntents::default(),
         last_phase: Phase::Idle,
-        decisions_since_request: 0,
+        requests_since_publish: 0,
         publish_failures: 0,
     };
     let waitset = WaitSetBuilder::new()
@@ -381,14 +383,31 @@ pub fn run_observed(
     let tick = waitset
         .attach_interval(Duration::from_nanos(period_ns))
         .map_err(|e| IpcError(format!("attaching the {period_ns} ns interval: {e:?}")))?;
+    let arrival = match &scene_ready {
+        Some(l) => Some(
+            waitset
+                .attach_notification(l)
+                .map_err(|e| IpcError(format!("attaching scene_ready: {e:?}")))?,
+        ),
+        None => None,
+    };
     state.notifier.ready();
     let until_ns = stop
         .duration_s
         .map(|d| now.saturating_add((d * 1e9) as u64));
     let mut failure = None;
     let result = waitset.wait_and_process(|id| {
-        if id.has_event_from(&tick) {
-            if let Err(e) = state.tick() {
+        let arrived = arrival.as_ref().is_some_and(|a| id.has_event_from(a));
+        if arrived {
+            if let Some(l) = &scene_ready {
+                if let Err(e) = l.try_wait(|_| {}) {
+                    failure = Some(IpcError(format!("scene_ready: {e:?}")));
+                    return CallbackProgression::Stop;
+                }
+            }
+        }
+        if arrived || id.has_event_from(&tick) {
+            if let Err(e) = state.tick(!arrived) {
                 failure = Some(e);
                 return CallbackProgression::Stop;
             }
@@ -418,12 +437,16 @@ pub fn run_observed(
 }
 
 impl Loop<'_> {
-    fn tick(&mut self) -> Result<(), IpcError> {
+    /// One pass: `interval` when the rate's tick woke it, else a scene's arrival.
+    fn tick(&mut self, interval: bool) -> Result<(), IpcError> {
         let t0 = now_ns();
         self.stats.ticks += 1;
-        let late = t0.saturating_sub(self.prev_tick_ns) > self.period_ns + self.period_ns / 2
+        let late = interval
+            && t0.saturating_sub(self.prev_tick_ns) > self.period_ns + self.period_ns / 2
             && self.stats.ticks > 1;
-        self.prev_tick_ns = t0;
+        if interval {
+            self.prev_tick_ns = t0;
+        }
 
         let (advice, n) = iox::newest(&self.ports.advice)?;
         self.stats.advice_received += n;
@@ -538,9 +561,12 @@ impl Loop<'_> {
         }
         self.publish_decision(&decision, compute);
         self.decide.record(now_ns() - rx);
-        self.decisions_since_request += 1;
-        if self.cfg.request_every > 0 && self.decisions_since_request >= self.cfg.request_every {
-            self.decisions_since_request = 0;
+        if decision.request_id != decision.cycle {
+            return;
+        }
+        self.requests_since_publish += 1;
+        if self.cfg.request_every > 0 && self.requests_since_publish >= self.cfg.request_every {
+            self.requests_since_publish = 0;
             let issued = secs(started);
             let deadline = issued + self.core.params().advice.deadline_s;
             let request = AdviceRequest::from_core(
@@ -593,6 +619,11 @@ impl Loop<'_> {
         }
         if iox::send(&self.ports.decision, &wire).is_err() {
             self.publish_failures += 1;
+        }
+        if let Some(n) = &self.ports.decision_ready {
+            if n.notify().is_err() {
+                self.publish_failures += 1;
+            }
         }
     }
 

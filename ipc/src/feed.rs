@@ -12,6 +12,7 @@ use concord_core::scene::{AgentState, Morphology, Scene, Vec2, MAX_AGENTS};
 use concord_core::trajectory::{Trajectory, TrajectoryPoint};
 use concord_map::{merge, paper};
 use iceoryx2::config::Config;
+use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::*;
 use rand::rngs::StdRng;
@@ -326,8 +327,10 @@ impl World {
 pub fn run(cfg: &FeedConfig, iox_config: &Config) -> Result<FeedSummary, IpcError> {
     let scene_name = services::name(&cfg.prefix, services::SCENE);
     let mut node = iox::node("concord-feed", iox_config)?;
+    let ready_name = services::name(&cfg.prefix, services::SCENE_READY);
     let mut publisher: Publisher<ipc::Service, SceneFrame, ()> =
         iox::publisher(&node, &scene_name)?;
+    let mut ready = iox::notifier(&node, &ready_name)?;
     let decisions = iox::subscriber::<WireDecision>(
         &node,
         &services::name(&cfg.prefix, services::DECISION),
@@ -399,7 +402,7 @@ pub fn run(cfg: &FeedConfig, iox_config: &Config) -> Result<FeedSummary, IpcErro
                     }
                     Fault::Duplicate => {
                         if let Some(p) = previous {
-                            iox::send(&publisher, &p)?;
+                            publish(&publisher, &ready, &p)?;
                         }
                         continue;
                     }
@@ -408,22 +411,23 @@ pub fn run(cfg: &FeedConfig, iox_config: &Config) -> Result<FeedSummary, IpcErro
                             let mut older = p;
                             older.sequence = p.sequence.saturating_sub(1);
                             older.stamp_ns = p.stamp_ns - 1;
-                            iox::send(&publisher, &older)?;
+                            publish(&publisher, &ready, &older)?;
                         }
                         continue;
                     }
                     Fault::Restart => {
-                        drop(publisher);
+                        drop((publisher, ready));
                         drop(node);
                         node = iox::node("concord-feed", iox_config)?;
                         publisher = iox::publisher(&node, &scene_name)?;
+                        ready = iox::notifier(&node, &ready_name)?;
                         sequence = 0;
                         frame.sequence = 0;
                     }
                 }
             }
         }
-        iox::send(&publisher, &frame)?;
+        publish(&publisher, &ready, &frame)?;
         sequence += 1;
         if !matches!(fault, Some(Fault::Nan | Fault::Jump)) {
             summary.valid_frames += 1;
@@ -431,6 +435,19 @@ pub fn run(cfg: &FeedConfig, iox_config: &Config) -> Result<FeedSummary, IpcErro
         }
     }
     Ok(summary)
+}
+
+/// Publishes `frame` and wakes a core that decides on arrival (`scene_ready`).
+fn publish(
+    publisher: &Publisher<ipc::Service, SceneFrame, ()>,
+    ready: &Notifier<ipc::Service>,
+    frame: &SceneFrame,
+) -> Result<(), IpcError> {
+    iox::send(publisher, frame)?;
+    ready
+        .notify()
+        .map_err(|e| IpcError(format!("notifying scene_ready: {e:?}")))?;
+    Ok(())
 }
 
 /// The trajectory of a published decision, as the core's type (Frenet fields left at 0).

@@ -5,6 +5,8 @@ use std::fmt::Debug;
 use std::path::Path;
 
 use iceoryx2::config::Config;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
@@ -120,6 +122,34 @@ pub fn subscriber<T: Debug + ZeroCopySend + 'static>(
         .buffer_size(buffer.clamp(1, MAX_BUFFER))
         .create()
         .map_err(|e| err(format!("subscriber on {name:?}"), e))
+}
+
+/// A listener on the event service `name` (iceoryx2's default event settings).
+pub fn listener(node: &Node<ipc::Service>, name: &str) -> Result<Listener<ipc::Service>, IpcError> {
+    event(node, name)?
+        .listener_builder()
+        .create()
+        .map_err(|e| err(format!("listener on {name:?}"), e))
+}
+
+/// A notifier on the event service `name` (iceoryx2's default event settings).
+pub fn notifier(node: &Node<ipc::Service>, name: &str) -> Result<Notifier<ipc::Service>, IpcError> {
+    event(node, name)?
+        .notifier_builder()
+        .create()
+        .map_err(|e| err(format!("notifier on {name:?}"), e))
+}
+
+fn event(
+    node: &Node<ipc::Service>,
+    name: &str,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>, IpcError> {
+    let service_name =
+        ServiceName::new(name).map_err(|e| err(format!("service name {name:?}"), e))?;
+    node.service_builder(&service_name)
+        .event()
+        .open_or_create()
+        .map_err(|e| err(format!("opening event service {name:?}"), e))
 }
 
 /// Publishes a copy of `value`.

@@ -10,6 +10,10 @@
 //! | `intent_text` | [`IntentText`](crate::wire::IntentText) | eHMI input, passenger UI | sidecar |
 //! | `ehmi` | [`EhmiMessage`](crate::wire::EhmiMessage) | sidecar | eHMI display, monitor |
 //! | `stats` | [`CoreStats`](crate::wire::CoreStats) | core | monitor |
+//!
+//! Two event services wake lock-step simulators and a core that decides on arrival
+//! (`service.decide_on = "arrival"`): scene publishers notify `scene_ready` after each frame,
+//! and such a core notifies `decision_ready` after each decision.
 
 /// Default prefix.
 pub const DEFAULT_PREFIX: &str = "concord/";
@@ -21,6 +25,8 @@ pub const ADVICE: &str = "advice";
 pub const INTENT_TEXT: &str = "intent_text";
 pub const EHMI: &str = "ehmi";
 pub const STATS: &str = "stats";
+pub const SCENE_READY: &str = "scene_ready";
+pub const DECISION_READY: &str = "decision_ready";
 
 /// Full service name of `service` under `prefix`.
 pub fn name(prefix: &str, service: &str) -> String {

@@ -291,7 +291,9 @@ pub struct WirePoint {
 #[type_name("ConcordDecision")]
 #[repr(C)]
 pub struct WireDecision {
-    /// Sequence number of the scene it answers.
+    /// Sequence number of the scene it answers. A stale-scene fallback (`fallback =
+    /// stale_scene`) answers no new scene and carries the last valid one's: a client matching
+    /// decisions to its frames skips it by that code.
     pub scene_sequence: u64,
     /// Core cycle; also the id of the advice request issued with it.
     pub cycle: u64,
@@ -472,7 +474,7 @@ pub struct WireObject {
 #[type_name("ConcordAdviceRequest")]
 #[repr(C)]
 pub struct AdviceRequest {
-    /// Id the advice must quote (the core cycle).
+    /// Id the advice must quote (the core cycle that issued it).
     pub request_id: u64,
     pub scene_sequence: u64,
     /// When it was issued, and by when the answer must arrive, ns.

@@ -1,9 +1,10 @@
 //! What the core process does with the advice it receives, over real iceoryx2 services: a
 //! malformed advice or a failure report installs nothing (the scenes after it are decided as
 //! before), and the deadline is judged by the advice's publish stamp, to the millisecond, at
-//! 20, 50 and 100 Hz; the intents a valid advice carries reach the core's scenes until they
-//! expire; every advice received is counted once; a configured route replaces the lane the
-//! frames name. A test thread plays the sidecar.
+//! 20, 50 and 100 Hz; deciding on arrival at 1000 frames a second, requests are issued at
+//! most every 45 ms and one 1.2 s old is still answered in time; the intents a valid advice
+//! carries reach the core's scenes until they expire; every advice received is counted once;
+//! a configured route replaces the lane the frames name. A test thread plays the sidecar.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -12,7 +13,7 @@ use std::time::Duration;
 use concord_core::scene::{AgentState, IntentAction, Scene, Task, Turn, Vec2};
 use concord_core::{AdviceVerdict, DecisionCore, FallbackReason, Maneuver, Params};
 use concord_ipc::clock::now_ns;
-use concord_ipc::core_service::{self, ServiceConfig, StopAfter};
+use concord_ipc::core_service::{self, DecideOn, ServiceConfig, StopAfter};
 use concord_ipc::system::RealtimeConfig;
 use concord_ipc::wire::{
     AdviceRequest, CoreStats, WireAdvice, WireAgentIntent, WireIntent, UNKNOWN, WIRE_OBJECTS,
@@ -59,21 +60,39 @@ fn service(prefix: &str, rate_hz: f64) -> ServiceConfig {
     }
 }
 
-/// Runs the core as `cfg` says for `seconds` beside the feeder (with the car `hdv`) and
-/// `sidecar`, which gets the request subscriber and the advice publisher on its own thread;
-/// returns the final counters, after checking that every advice received is counted once.
+/// Runs the core as `cfg` says for `seconds` beside the feeder (with the car `hdv`, a frame
+/// every 50 ms) and `sidecar`, which gets the request subscriber and the advice publisher on
+/// its own thread; returns the final counters, after checking that every advice received is
+/// counted once. The advice deadline is 0.3 s.
 fn run(
     cfg: ServiceConfig,
     hdv: bool,
     seconds: f64,
     sidecar: impl FnOnce(&Requests, &AdviceOut) + Send + 'static,
 ) -> CoreStats {
+    run_fed(cfg, hdv, seconds, 0.05, 0.3, sidecar)
+}
+
+/// [`run`] with a frame every `frame_period_s` and an advice deadline of `deadline_s`.
+fn run_fed(
+    cfg: ServiceConfig,
+    hdv: bool,
+    seconds: f64,
+    frame_period_s: f64,
+    deadline_s: f64,
+    sidecar: impl FnOnce(&Requests, &AdviceOut) + Send + 'static,
+) -> CoreStats {
     let prefix = cfg.prefix.as_str();
     let config = iox::init(None).expect("iceoryx2 config");
     let stop = Arc::new(AtomicBool::new(false));
-    let feed = scene_feeder::spawn("intake-feeder", prefix, &config, &stop, 0.05, move |t| {
-        scene_at(t, hdv)
-    });
+    let feed = scene_feeder::spawn(
+        "intake-feeder",
+        prefix,
+        &config,
+        &stop,
+        frame_period_s,
+        move |t| scene_at(t, hdv),
+    );
     let side = {
         let (config, prefix) = (config.clone(), prefix.to_string());
         std::thread::spawn(move || {
@@ -86,7 +105,7 @@ fn run(
     };
     let mut params = Params::default();
     params.trajectory.samples = 128;
-    params.advice.deadline_s = 0.3;
+    params.advice.deadline_s = deadline_s;
     let road = cfg.road().expect("the map loads");
     let mut core = Box::new(DecisionCore::new(params, road.map.morphology()).unwrap());
     let stats = core_service::run(
@@ -253,6 +272,62 @@ fn publish_around_the_deadline(rate_hz: f64) {
     let v = |x: AdviceVerdict| stats.advice_verdicts[x as usize];
     assert_eq!(v(AdviceVerdict::Accepted), 3, "at {rate_hz} Hz: {stats:?}");
     assert_eq!(v(AdviceVerdict::Late), 3, "at {rate_hz} Hz: {stats:?}");
+}
+
+/// Deciding on each of a frame every millisecond, the core issues an advice request at most
+/// every 0.9 × `request_period_s` (45 ms), so its log of 256 requests spans 11 s whatever
+/// the rate: an answer to a request 1.2 s (about 1200 decisions) old, within its 1.5 s
+/// deadline, is accepted. (A log of the last 256 cycles had forgotten it after 0.26 s.)
+#[test]
+fn the_request_log_spans_the_deadline_at_a_thousand_decisions_a_second() {
+    let prefix = format!("intake-fast-{}/", std::process::id());
+    let cfg = ServiceConfig {
+        decide_on: DecideOn::Arrival,
+        ..service(&prefix, 1000.0)
+    };
+    let gaps = Arc::new(std::sync::Mutex::new(Vec::new()));
+    let seen = gaps.clone();
+    let stats = run_fed(cfg, false, 3.0, 0.001, 1.5, move |requests, out| {
+        let first = next_request(requests, 0);
+        let mut last = first.issued_ns;
+        let mut ids = vec![first.request_id];
+        while now_ns() < first.issued_ns + 1_200_000_000 {
+            if let (Some(r), _) = iox::newest(requests).expect("receive") {
+                if r.issued_ns > last {
+                    seen.lock().unwrap().push(r.issued_ns - last);
+                    last = r.issued_ns;
+                    ids.push(r.request_id);
+                }
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        let mut a = answer(&first);
+        a.published_ns = now_ns();
+        iox::send(out, &a).expect("send");
+        assert!(
+            ids.windows(2).all(|w| w[1] > w[0]),
+            "request ids grow: {ids:?}"
+        );
+    });
+    let gaps = gaps.lock().unwrap();
+    assert!(gaps.len() >= 15, "{} requests in 1.2 s", gaps.len());
+    let close = gaps.iter().filter(|&&g| g < 45_000_000).count();
+    assert_eq!(
+        close,
+        0,
+        "{close} of {} requests closer than 45 ms to the one before (the closest {} ns)",
+        gaps.len(),
+        gaps.iter().min().unwrap()
+    );
+    assert!(
+        stats.frames_accepted > 1500,
+        "too few decisions for the test: {stats:?}"
+    );
+    assert_eq!(
+        stats.advice_verdicts[AdviceVerdict::Accepted as usize],
+        1,
+        "{stats:?}"
+    );
 }
 
 #[test]

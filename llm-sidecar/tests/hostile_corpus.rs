@@ -102,7 +102,7 @@ fn unescape(line: &str) -> String {
 /// request on it.
 fn scene() -> (WireDecision, AdviceRequest) {
     let (scene, core, d) = first_step();
-    let request = AdviceRequest::from_core(d.cycle, 1, now_ns(), 0, &d, &core, scene.ego_lane);
+    let request = AdviceRequest::from_core(d.request_id, 1, now_ns(), 0, &d, &core, scene.ego_lane);
     (
         WireDecision::from_decision(&d, 1, now_ns(), now_ns(), 0),
         request,
@@ -139,7 +139,7 @@ fn judge(a: &WireAdvice) -> (Decision, bool) {
     scene.time_s += 0.05;
     c.merge_intents_into(&mut scene);
     let advice = Advice {
-        request_id: first.cycle,
+        request_id: first.request_id,
         published_at_s: scene.time_s - 0.01,
         ..c.advice
     };

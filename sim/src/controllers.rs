@@ -366,7 +366,7 @@ fn ehmi_of(d: &Decision) -> Option<Signal> {
 pub struct ConcordController {
     core: Box<DecisionCore>,
     advisor: Advisor,
-    last_cycle: Option<u64>,
+    last_request: Option<u64>,
     /// The newest decision.
     pub last: Option<Decision>,
     /// Decisions taken by source (`DecisionSource` code).
@@ -378,7 +378,7 @@ impl ConcordController {
         ConcordController {
             core: Box::new(DecisionCore::new(params, w.morph).expect("valid parameters")),
             advisor,
-            last_cycle: None,
+            last_request: None,
             last: None,
             sources: [0; 3],
         }
@@ -397,7 +397,7 @@ impl ConcordController {
                 ehmi: None,
             };
         };
-        self.last_cycle = Some(d.cycle);
+        self.last_request = Some(d.request_id);
         self.last = Some(d);
         self.sources[d.source as usize] += 1;
         let accel = d
@@ -413,7 +413,7 @@ impl ConcordController {
 
 impl Controller for ConcordController {
     fn act(&mut self, w: &World, drivers: &[HumanDriver]) -> Command {
-        let advice = match (self.advisor, self.last_cycle) {
+        let advice = match (self.advisor, self.last_request) {
             (Advisor::Oracle, Some(id)) => Some(Advice {
                 request_id: id,
                 maneuver: oracle(w, drivers),
@@ -498,7 +498,7 @@ impl Controller for ExternalAdvice<'_> {
                     self.source.advise(self.inner.core(), &d, w)
                 {
                     let advice = Advice {
-                        request_id: d.cycle,
+                        request_id: d.request_id,
                         maneuver,
                         confidence,
                         published_at_s: match self.timing {

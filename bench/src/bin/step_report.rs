@@ -1,27 +1,53 @@
 //! Latency report of the full core step: percentiles and maximum over many closed-loop steps
 //! of dense traffic.
 //!
-//! `cargo run --release -p concord-bench --bin step_report -- [steps] [agents] [samples]`
-//! (defaults 10 000, 16, 1024). Pin it to one core with `taskset -c 1` for stable figures.
+//! `cargo run --release -p concord-bench --bin step_report -- [steps] [agents] [samples]
+//! [MAP ROUTE]` (defaults 10 000, 16, 1024, the paper's intersection). With a map file and
+//! the ego's route on it, it also reports how long loading the map took. Pin it to one core
+//! with `taskset -c 1` for stable figures.
 
+use std::path::Path;
 use std::time::Instant;
 
-use concord_bench::{core, Traffic};
+use concord_bench::{core, core_on, Traffic};
 use concord_core::DecisionSource;
+use concord_map::Map;
 
 fn main() {
-    let args: Vec<usize> = std::env::args()
-        .skip(1)
-        .map(|a| {
-            a.parse()
-                .unwrap_or_else(|_| panic!("arguments are counts: steps agents samples; got {a:?}"))
+    let all: Vec<String> = std::env::args().skip(1).collect();
+    let count = |i: usize, default: usize| {
+        all.get(i).map_or(default, |a| {
+            a.parse().unwrap_or_else(|_| {
+                panic!("arguments: steps agents samples [MAP ROUTE]; got {a:?}")
+            })
         })
-        .collect();
-    let steps = args.first().copied().unwrap_or(10_000);
-    let agents = args.get(1).copied().unwrap_or(16);
-    let samples = args.get(2).copied().unwrap_or(1024);
-    let mut core = Box::new(core(samples));
-    let mut traffic = Traffic::new(&core, agents);
+    };
+    let steps = count(0, 10_000);
+    let agents = count(1, 16);
+    let samples = count(2, 1024);
+    let (mut core, mut traffic) = match (all.get(3), all.get(4)) {
+        (Some(path), Some(route)) => {
+            let started = Instant::now();
+            let (map, lane) =
+                Map::load_route(Path::new(path), Some(route)).unwrap_or_else(|e| panic!("{e}"));
+            let core = Box::new(core_on(map.morphology(), samples));
+            println!(
+                "map {path}: {} lanes, {} conflict points, loaded in {:.2} ms",
+                map.ids().len(),
+                core.morphology().conflicts().len(),
+                started.elapsed().as_secs_f64() * 1e3
+            );
+            let lane = lane.expect("a route");
+            let traffic = Traffic::on_map(&core, lane, agents);
+            (core, traffic)
+        }
+        (None, None) => {
+            let core = Box::new(core(samples));
+            let traffic = Traffic::new(&core, agents);
+            (core, traffic)
+        }
+        _ => panic!("a map needs the ego's route: MAP ROUTE"),
+    };
     let mut micros = Vec::with_capacity(steps);
     let (mut replanned, mut minimum_risk) = (0, 0);
     for _ in 0..steps {

@@ -1,5 +1,6 @@
 //! A thread that plays perception for the core process's tests: it publishes a scene on the
-//! `scene` service under a prefix at a fixed period until told to stop.
+//! `scene` service under a prefix at a fixed period until told to stop, and notifies
+//! `scene_ready` after each (what wakes a core deciding on arrival).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -28,11 +29,14 @@ pub fn spawn(
         let publisher =
             iox::publisher::<SceneFrame>(&node, &services::name(&prefix, services::SCENE))
                 .expect("publisher");
+        let ready = iox::notifier(&node, &services::name(&prefix, services::SCENE_READY))
+            .expect("notifier");
         let mut seq = 0;
         while !stop.load(Ordering::Relaxed) {
             seq += 1;
             let scene = scene_at(seq as f64 * period_s);
             iox::send(&publisher, &SceneFrame::from_scene(seq, now_ns(), &scene)).expect("send");
+            ready.notify().expect("notify");
             std::thread::sleep(Duration::from_secs_f64(period_s));
         }
     })

@@ -140,7 +140,7 @@ fn snapshot(frame: u64, seed: u64) -> Snapshot {
     // As `concord run` issues it (ipc/src/core_service.rs, `decide_on`).
     let deadline_s = scene.time_s + core.params().advice.deadline_s;
     let request = AdviceRequest::from_core(
-        decision.cycle,
+        decision.request_id,
         seq,
         stamp_ns,
         (deadline_s * 1e9) as u64,
