@@ -13,13 +13,13 @@ use crate::params::AdviceParams;
 use crate::scene::Turn;
 
 /// Capacity of the request log. The core issues a request at most every
-/// `0.9 × advice.request_period_s`, so the log spans at least that times `MAX_PENDING − 1` in
+/// `0.5 × advice.request_period_s`, so the log spans at least that times `MAX_PENDING − 1` in
 /// time, whatever the loop rate; `Params::validate` holds `advice.deadline_s` within it.
 pub const MAX_PENDING: usize = 256;
 
-/// Share of `advice.request_period_s` after which the next request is due (a tick's jitter
-/// does not skip one).
-pub const REQUEST_DUE_SHARE: f64 = 0.9;
+/// Share of `advice.request_period_s` after which the next request is due: with scenes at
+/// that period, a frame that arrives early (jitter, the loop's tick) still issues one.
+pub const REQUEST_DUE_SHARE: f64 = 0.5;
 
 /// Advice as received from the sidecar, with the sidecar's publish stamp.
 #[derive(Clone, Copy, Debug, PartialEq)]

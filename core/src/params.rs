@@ -242,9 +242,9 @@ impl Default for InteractionParams {
 #[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AdviceParams {
-    /// The core issues an advice request at most this often, s: with every decision at this
-    /// period or slower, and with the first decision after 90 % of it at faster loop rates.
-    /// The request log then spans `deadline_s` at any rate (`advice::MAX_PENDING`).
+    /// Period of advice requests, s: a decision issues one when at least half of it has
+    /// passed since the last (at this period, every decision, even an early one). The request
+    /// log then spans `deadline_s` at any loop rate (`advice::MAX_PENDING`).
     pub request_period_s: f64,
     /// Smallest confidence accepted (0.7, §4.3).
     pub confidence_min: f64,
@@ -746,8 +746,8 @@ impl Params {
         if a.deadline_s > log_span_s {
             return bad(
                 "advice.request_period_s",
-                "the request log (256 requests at 0.9 request_period_s apart) must span \
-                 advice.deadline_s: need request_period_s >= deadline_s / 229.5",
+                "the request log (256 requests at 0.5 request_period_s apart) must span \
+                 advice.deadline_s: need request_period_s >= deadline_s / 127.5",
             );
         }
         if t.emergency_brake_mps2 < t.max_brake_mps2 {

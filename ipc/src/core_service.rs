@@ -5,7 +5,7 @@
 //!
 //! Each tick: drain `scene` (newest wins) and `advice`; check the frame's sequence and codes;
 //! step the core (which checks every number); publish `decision` and, for every
-//! `request_every`-th request the core issues (at most every `advice.request_period_s`),
+//! `request_every`-th request the core issues (`advice.request_period_s`),
 //! `advice_request`. With no valid scene for `staleness_s`, every tick publishes the
 //! minimum-risk fallback: it carries the last valid frame's `scene_sequence` and
 //! `fallback = stale_scene`, so a client matching decisions to frames skips it by that code.
@@ -103,8 +103,8 @@ pub struct ServiceConfig {
     pub decide_on: DecideOn,
     /// After this long without a valid scene the minimum-risk fallback applies, s.
     pub staleness_s: f64,
-    /// Publish every n-th advice request the core issues (0: never); the core issues one at
-    /// most every `core.advice.request_period_s`.
+    /// Publish every n-th advice request the core issues (0: never); see
+    /// `core.advice.request_period_s`.
     pub request_every: u32,
     /// Period of `stats` messages, s.
     pub stats_period_s: f64,

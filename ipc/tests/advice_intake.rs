@@ -2,7 +2,7 @@
 //! malformed advice or a failure report installs nothing (the scenes after it are decided as
 //! before), and the deadline is judged by the advice's publish stamp, to the millisecond, at
 //! 20, 50 and 100 Hz; deciding on arrival at 1000 frames a second, requests are issued at
-//! most every 45 ms and one 1.2 s old is still answered in time; the intents a valid advice
+//! most every 25 ms and one 1.2 s old is still answered in time; the intents a valid advice
 //! carries reach the core's scenes until they expire; every advice received is counted once;
 //! a configured route replaces the lane the frames name. A test thread plays the sidecar.
 
@@ -275,7 +275,7 @@ fn publish_around_the_deadline(rate_hz: f64) {
 }
 
 /// Deciding on each of a frame every millisecond, the core issues an advice request at most
-/// every 0.9 × `request_period_s` (45 ms), so its log of 256 requests spans 11 s whatever
+/// every 0.5 × `request_period_s` (25 ms), so its log of 256 requests spans 6.4 s whatever
 /// the rate: an answer to a request 1.2 s (about 1200 decisions) old, within its 1.5 s
 /// deadline, is accepted. (A log of the last 256 cycles had forgotten it after 0.26 s.)
 #[test]
@@ -311,11 +311,11 @@ fn the_request_log_spans_the_deadline_at_a_thousand_decisions_a_second() {
     });
     let gaps = gaps.lock().unwrap();
     assert!(gaps.len() >= 15, "{} requests in 1.2 s", gaps.len());
-    let close = gaps.iter().filter(|&&g| g < 45_000_000).count();
+    let close = gaps.iter().filter(|&&g| g < 25_000_000).count();
     assert_eq!(
         close,
         0,
-        "{close} of {} requests closer than 45 ms to the one before (the closest {} ns)",
+        "{close} of {} requests closer than 25 ms to the one before (the closest {} ns)",
         gaps.len(),
         gaps.iter().min().unwrap()
     );
