@@ -187,7 +187,8 @@ enum Command {
         /// Road geometry, a built-in map, overriding the file's `service.geometry`.
         #[arg(long, value_enum, conflicts_with = "map")]
         geometry: Option<GeometryArg>,
-        /// Map file (TOML, see deploy/maps/README.md), overriding the file's `service.map`.
+        /// Map file: TOML, a SUMO network (.net.xml) or OpenDRIVE (.xodr); see
+        /// deploy/maps/README.md. Overrides the file's `service.map`.
         #[arg(long)]
         map: Option<PathBuf>,
         /// The ego's route: a lane id of the map, overriding the file's `service.route`.

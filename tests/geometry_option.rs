@@ -142,7 +142,8 @@ fn a_configuration_file_names_its_map_relative_to_itself() {
     assert!(String::from_utf8_lossy(&bad.stderr).contains("no lane \"shoulder\""));
 }
 
-/// `concord run --map` starts on every map shipped in `deploy/maps/` (and its SUMO network),
+/// `concord run --map` starts on every map shipped in `deploy/maps/` (and its SUMO network and
+/// OpenDRIVE file),
 /// deciding on its tick or on each scene's arrival.
 #[test]
 fn every_shipped_map_runs() {
@@ -154,6 +155,7 @@ fn every_shipped_map_runs() {
     maps.sort();
     assert_eq!(maps.len(), 5, "{maps:?}");
     maps.push(maps_dir().join("sumo/paper.net.xml"));
+    maps.push(maps_dir().join("opendrive/paper.xodr"));
     for (k, map) in maps.iter().enumerate() {
         let arrival = k % 2 == 1;
         let mut road = vec!["--map", map.to_str().unwrap()];

@@ -32,9 +32,14 @@ fn scenes_in_advice_intents_and_ehmi_text_out() {
     let texts = iox::publisher::<IntentText>(&node, &name(services::INTENT_TEXT)).expect("texts");
 
     // This test checks the plumbing, not the model's speed: a 10 s advice deadline keeps it
-    // meaningful on a loaded machine (the latency is measured by `advice_report`).
+    // meaningful on a loaded machine (the latency is measured by `advice_report`); requests
+    // every 0.1 s, so that the core's log of 256 requests spans it.
     let config = std::env::temp_dir().join(format!("concord-e2e-{}.toml", std::process::id()));
-    std::fs::write(&config, "[core.advice]\ndeadline_s = 10.0\n").unwrap();
+    std::fs::write(
+        &config,
+        "[core.advice]\ndeadline_s = 10.0\nrequest_period_s = 0.1\n",
+    )
+    .unwrap();
     let args = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
     let mut core = Proc::start(
         &args(&[

@@ -112,8 +112,8 @@ pub struct ServiceConfig {
     pub print_period_s: f64,
     /// Geometry of the road: a built-in map.
     pub geometry: Geometry,
-    /// A map file, replacing `geometry`: Concord's TOML format (`deploy/maps/README.md`) or a
-    /// SUMO network (`*.net.xml`).
+    /// A map file, replacing `geometry`: Concord's TOML format (`deploy/maps/README.md`), a
+    /// SUMO network (`*.net.xml`) or an OpenDRIVE file (`*.xodr`).
     pub map: Option<PathBuf>,
     /// The ego's route: the id of a lane of the map (of a SUMO network, a movement
     /// "incoming lane>outgoing lane" or "incoming edge>outgoing edge"). Scene frames then need

@@ -23,6 +23,8 @@ use concord_core::scene::{
 };
 use serde::Deserialize;
 
+mod movements;
+pub mod opendrive;
 pub mod sumo;
 
 /// Default spacing of the vertices an arc is sampled at, m.
@@ -53,21 +55,24 @@ pub struct Map {
 }
 
 impl Map {
-    /// Reads and loads a map file: Concord's TOML format, or a SUMO network (`*.net.xml`,
-    /// see [`sumo`]).
+    /// Reads and loads a map file: Concord's TOML format, a SUMO network (`*.net.xml`, see
+    /// [`sumo`]) or an OpenDRIVE file (`*.xodr`, see [`opendrive`]).
     pub fn load(path: &Path) -> Result<Map, MapError> {
         Map::load_route(path, None).map(|(map, _)| map)
     }
 
     /// [`Map::load`], and the index of the ego's `route`: a lane id (for a SUMO network, a
-    /// movement id or `"{incoming edge}>{outgoing edge}"`, which also selects the movements
-    /// that are kept).
+    /// movement id or `"{incoming edge}>{outgoing edge}"`, for OpenDRIVE one or
+    /// `"{incoming road}>{outgoing road}"`; either also selects the movements that are kept).
     pub fn load_route(path: &Path, route: Option<&str>) -> Result<(Map, Option<u8>), MapError> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| MapError(format!("cannot read map {}: {e}", path.display())))?;
         let origin = path.display().to_string();
         if origin.ends_with(".net.xml") {
             return sumo::parse(&text, &origin, route);
+        }
+        if origin.ends_with(".xodr") {
+            return opendrive::parse(&text, &origin, route);
         }
         Map::parse(&text, &origin)?.with_route(route)
     }

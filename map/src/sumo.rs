@@ -26,13 +26,11 @@
 
 use std::collections::HashMap;
 
-use concord_core::scene::{Lane, RightOfWay, Turn, Vec2, MAX_LANES, MAX_LANE_POINTS};
+use concord_core::scene::{RightOfWay, Turn, Vec2};
 
+pub use crate::movements::RELEVANT_RADIUS_M;
+use crate::movements::{assemble, Movement};
 use crate::{Map, MapError};
-
-/// Junctions whose centre lies within this distance of the route's junction keep their
-/// movements, m.
-pub const RELEVANT_RADIUS_M: f64 = 60.0;
 /// Lane width SUMO assumes when a lane has none, m.
 const SUMO_DEFAULT_WIDTH_M: f64 = 3.2;
 /// Consecutive vertices closer than this are merged when shapes are joined, m: SUMO's
@@ -45,19 +43,6 @@ const SAME_POINT_M: f64 = 0.05;
 
 struct SumoLane {
     shape: Vec<Vec2>,
-    width: f64,
-}
-
-struct Movement {
-    id: String,
-    from_edge: String,
-    to_edge: String,
-    junction: String,
-    /// Junction-internal lanes, in driving order.
-    via: Vec<String>,
-    turn: Turn,
-    points: Vec<Vec2>,
-    stop_s: f64,
     width: f64,
 }
 
@@ -231,6 +216,8 @@ pub fn parse(text: &str, origin: &str, route: Option<&str>) -> Result<(Map, Opti
         }
     }
     let mut movements = Vec::new();
+    // Each movement's junction-internal lanes, in driving order.
+    let mut vias = Vec::new();
     for (from_lane, to_lane, first_via, turn, from_edge, to_edge) in starts {
         let mut via = vec![first_via];
         while let Some(v) = next_via.get(via.last().unwrap()) {
@@ -279,112 +266,30 @@ pub fn parse(text: &str, origin: &str, route: Option<&str>) -> Result<(Map, Opti
         let junction = edge_to.get(&from_edge).cloned().unwrap_or_default();
         movements.push(Movement {
             id: format!("{from_lane}>{to_lane}"),
-            from_edge,
-            to_edge,
+            from: from_edge,
+            to: to_edge,
             junction,
-            via,
             turn,
             points,
             stop_s,
             width: incoming.width,
         });
+        vias.push(via);
     }
     if movements.is_empty() {
         return Err(err("no connection through a junction".into()));
     }
-    // The route's movement, then the movements to keep.
-    let route_at = match route {
-        None => None,
-        Some(r) => Some(
-            movements
-                .iter()
-                .position(|m| m.id == r)
-                .or_else(|| {
-                    let (from, to) = r.split_once('>')?;
-                    movements
-                        .iter()
-                        .position(|m| m.from_edge == from && m.to_edge == to)
-                })
-                .ok_or_else(|| {
-                    err(format!(
-                        "no movement {r:?}: give \"incoming lane>outgoing lane\" or \
-                         \"incoming edge>outgoing edge\", e.g. {:?}",
-                        movements[0].id
-                    ))
-                })?,
-        ),
-    };
-    // On an approach shared by several movements an agent without a turn signal matches the
-    // one with the lowest index (`Morphology::match_lane`): straight movements come first,
-    // as SUMO's vehicles show blinkers only to turn.
-    let rank = |m: &Movement| match m.turn {
-        Turn::Straight => 0,
-        Turn::Right => 1,
-        Turn::Left => 2,
-    };
-    let mut order: Vec<usize> = (0..movements.len()).collect();
-    order.sort_by_key(|&i| rank(&movements[i]));
-    let keep: Vec<usize> = match route_at {
-        None => order,
-        Some(r) => {
-            let centre = |j: &str| junctions.get(j).map(|j| j.centre);
-            let here = centre(&movements[r].junction);
-            let mut keep = vec![r];
-            keep.extend(order.into_iter().filter(|&i| {
-                i != r
-                    && match (here, centre(&movements[i].junction)) {
-                        (Some(a), Some(b)) => a.minus(b).norm() <= RELEVANT_RADIUS_M,
-                        _ => false,
-                    }
-            }));
-            keep
-        }
-    };
-    if keep.len() > MAX_LANES {
-        return Err(err(format!(
-            "{} movements{}, more than the core's capacity MAX_LANES = {MAX_LANES}{}",
-            keep.len(),
-            if route.is_some() {
-                format!(" within {RELEVANT_RADIUS_M} m of the route's junction")
-            } else {
-                String::new()
-            },
-            if route.is_some() {
-                ""
-            } else {
-                " (give a route to keep only those near it)"
-            }
-        )));
-    }
-    let mut core_lanes = Vec::with_capacity(keep.len());
-    for &i in &keep {
-        let m = &movements[i];
-        if m.points.len() > MAX_LANE_POINTS {
-            return Err(err(format!(
-                "movement {}: {} vertices, more than the core's capacity \
-                 MAX_LANE_POINTS = {MAX_LANE_POINTS}",
-                m.id,
-                m.points.len()
-            )));
-        }
-        let lane = Lane::new(&m.points, 0.5 * m.width, m.stop_s, m.turn)
-            .map_err(|e| err(format!("movement {}: {e:?}", m.id)))?;
-        core_lanes.push(lane);
-    }
-    let ids: Vec<String> = keep.iter().map(|&i| movements[i].id.clone()).collect();
-    let name = origin.rsplit('/').next().unwrap_or(origin).to_string();
-    let mut map = Map::from_lanes(
-        name,
-        ids,
-        vec![Vec::new(); keep.len()],
-        &core_lanes,
-        Default::default(),
-    )
-    .map_err(|e| err(e.0))?;
+    let (mut map, route_lane, keep) = assemble(
+        &movements,
+        |j| junctions.get(j).map(|j| j.centre),
+        route,
+        "\"incoming lane>outgoing lane\" or \"incoming edge>outgoing edge\"",
+        origin,
+    )?;
     // SUMO's right of way between the movements of one junction.
-    let link = |m: &Movement| -> Option<usize> {
-        let j = junctions.get(&m.junction)?;
-        j.int_lanes.iter().position(|l| m.via.contains(l))
+    let link = |i: usize| -> Option<usize> {
+        let j = junctions.get(&movements[i].junction)?;
+        j.int_lanes.iter().position(|l| vias[i].contains(l))
     };
     for (a, &ia) in keep.iter().enumerate() {
         for (b, &ib) in keep.iter().enumerate().skip(a + 1) {
@@ -392,7 +297,7 @@ pub fn parse(text: &str, origin: &str, route: Option<&str>) -> Result<(Map, Opti
             if ma.junction != mb.junction {
                 continue;
             }
-            let (Some(la), Some(lb), Some(j)) = (link(ma), link(mb), junctions.get(&ma.junction))
+            let (Some(la), Some(lb), Some(j)) = (link(ia), link(ib), junctions.get(&ma.junction))
             else {
                 continue;
             };
@@ -407,5 +312,5 @@ pub fn parse(text: &str, origin: &str, route: Option<&str>) -> Result<(Map, Opti
             map.morphology.set_right_of_way(a as u8, b as u8, row);
         }
     }
-    Ok((map, route_at.map(|_| 0)))
+    Ok((map, route_lane))
 }
