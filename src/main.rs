@@ -249,9 +249,10 @@ enum Command {
     /// Load a map and print its lanes and the conflicts the core derives from them (what
     /// `concord run --map FILE --route ID` would drive on).
     Map {
-        /// Map file: Concord's TOML format (deploy/maps/README.md) or a SUMO network (*.net.xml).
+        /// Map file: Concord's TOML format (deploy/maps/README.md), a SUMO network (*.net.xml)
+        /// or an OpenDRIVE file (*.xodr).
         file: PathBuf,
-        /// The ego's route (for a SUMO network it also selects the movements kept).
+        /// The ego's route (for a SUMO network or OpenDRIVE it also selects the movements kept).
         #[arg(long)]
         route: Option<String>,
         /// Print JSON (lanes with their vertices, conflicts) instead of tables.

@@ -115,7 +115,7 @@ def netconvert():
 
 class OpenDrive(unittest.TestCase):
     def test_an_opendrive_road_loads_through_netconvert(self):
-        """OpenDRIVE reaches Concord through SUMO's netconvert (deploy/maps/README.md): the
+        """OpenDRIVE also reaches Concord through SUMO's netconvert (deploy/maps/README.md): the
         paper's junction written as .xodr and converted back loads with the same movements."""
         import tempfile
         with tempfile.TemporaryDirectory() as tmp:
