@@ -102,9 +102,6 @@ pub struct RequestLog {
     issued_at_s: [f64; MAX_PENDING],
     /// Slot the next request goes to.
     next: usize,
-    /// Id of the newest request, 0 before the first.
-    pub latest: u64,
-    latest_at_s: f64,
 }
 
 impl Default for RequestLog {
@@ -113,29 +110,33 @@ impl Default for RequestLog {
             ids: [0; MAX_PENDING],
             issued_at_s: [f64::NAN; MAX_PENDING],
             next: 0,
-            latest: 0,
-            latest_at_s: f64::NEG_INFINITY,
         }
     }
 }
 
 impl RequestLog {
-    /// Whether a request is due at `now`: none yet, or `REQUEST_DUE_SHARE × period_s` since
-    /// the newest (or the clock went back), s.
+    fn newest(&self) -> usize {
+        (self.next + MAX_PENDING - 1) % MAX_PENDING
+    }
+    /// Id of the newest request, 0 before the first.
+    pub fn latest(&self) -> u64 {
+        self.ids[self.newest()]
+    }
+    /// Whether a request is due at `now`: none yet (its time is NaN), or
+    /// `REQUEST_DUE_SHARE × period_s` since the newest (or the clock went back), s.
     pub fn due(&self, now: f64, period_s: f64) -> bool {
-        !(now - self.latest_at_s < REQUEST_DUE_SHARE * period_s && now >= self.latest_at_s)
+        let last = self.issued_at_s[self.newest()];
+        !(now - last < REQUEST_DUE_SHARE * period_s && now >= last)
     }
     /// Logs request `id` (greater than every id logged before) issued at `now`.
     pub fn issue(&mut self, id: u64, now: f64) {
         self.ids[self.next] = id;
         self.issued_at_s[self.next] = now;
         self.next = (self.next + 1) % MAX_PENDING;
-        self.latest = id;
-        self.latest_at_s = now;
     }
     /// Issue time of request `id` while it is among the last [`MAX_PENDING`] requests.
     pub fn issued_at(&self, id: u64) -> Option<f64> {
-        if id == 0 || id > self.latest {
+        if id == 0 || id > self.latest() {
             return None;
         }
         // Newest first; ids only grow, so the search ends at the first smaller one.

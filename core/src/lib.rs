@@ -352,7 +352,7 @@ impl DecisionCore {
 
         let mut decision = Decision {
             cycle: self.cycle,
-            request_id: self.requests.latest,
+            request_id: self.requests.latest(),
             scene_time_s: scene.time_s,
             logit_maneuver: self.choice.choice,
             p_logit: self.choice.p_logit,
