@@ -128,24 +128,14 @@ pub(crate) fn assemble(
 pub(crate) fn stop_line_centres(movements: &[Movement]) -> HashMap<String, Vec2> {
     let mut sums: HashMap<String, (Vec2, f64)> = HashMap::new();
     for m in movements {
-        let mut walked = 0.0;
-        let mut at = m.points[0];
-        for w in m.points.windows(2) {
-            let step = w[1].minus(w[0]).norm();
-            if walked + step >= m.stop_s {
-                at = w[0].plus(
-                    w[1].minus(w[0])
-                        .scale((m.stop_s - walked) / step.max(1e-12)),
-                );
-                break;
-            }
-            walked += step;
-            at = w[1];
-        }
+        // A movement whose lane cannot be built is refused by `assemble`, with its reason.
+        let Ok(lane) = Lane::new(&m.points, 0.5 * m.width, m.stop_s, m.turn) else {
+            continue;
+        };
         let e = sums
             .entry(m.junction.clone())
             .or_insert((Vec2::new(0.0, 0.0), 0.0));
-        e.0 = e.0.plus(at);
+        e.0 = e.0.plus(lane.pose_at(m.stop_s, 0).0);
         e.1 += 1.0;
     }
     sums.into_iter()

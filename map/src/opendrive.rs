@@ -18,8 +18,6 @@
 //! lane 0 and only the movements of junctions within [`RELEVANT_RADIUS_M`] of its junction are
 //! kept.
 
-use std::collections::HashMap;
-
 use concord_core::scene::{RightOfWay, Turn, Vec2};
 use xodr::{Direction, LaneId};
 
@@ -101,7 +99,6 @@ pub fn parse(text: &str, origin: &str, route: Option<&str>) -> Result<(Map, Opti
         }
         p
     };
-    let by_id: HashMap<LaneId, &xodr::Lane> = net.lanes().iter().map(|l| (l.id, l)).collect();
     let mut movements = Vec::new();
     // Each movement's connecting road.
     let mut connecting_roads = Vec::new();
@@ -115,11 +112,13 @@ pub fn parse(text: &str, origin: &str, route: Option<&str>) -> Result<(Map, Opti
         let connecting_road = net.road_lane(lane.id).expect("a named lane").road;
         let outside = |id: &&LaneId| {
             lane_name(**id).is_some_and(|(_, _, j)| j.is_none())
-                && by_id.get(*id).is_some_and(|l| l.kind.is_drivable())
+                && net.lane(**id).is_some_and(|l| l.kind.is_drivable())
         };
         for from in lane.predecessors.iter().filter(outside) {
             for to in lane.successors.iter().filter(outside) {
-                let (incoming, outgoing) = (by_id[from], by_id[to]);
+                let (Some(incoming), Some(outgoing)) = (net.lane(*from), net.lane(*to)) else {
+                    continue;
+                };
                 let (from_road, from_name, _) = lane_name(*from).expect("named");
                 let (to_road, to_name, _) = lane_name(*to).expect("named");
                 let pieces = [travel(incoming), travel(lane), travel(outgoing)];
