@@ -123,7 +123,9 @@ class TurnSignals(unittest.TestCase):
         self.assertGreater(checked, 10)
 
 
-class HighwayBridge(unittest.TestCase):
+class BridgeChecks:
+    """What every test of a bridge run checks: a well-formed summary and episodes."""
+
     def check_summary(self, stdout, result, policy, seeds, env="intersection-v0", top=20.0):
         last = stdout.strip().splitlines()[-1]
         m = SUMMARY.match(last)
@@ -147,6 +149,22 @@ class HighwayBridge(unittest.TestCase):
             self.assertFalse(e["crashed"] and e["arrived"])
         return s
 
+    def concord_seed(self, env, top, *args):
+        """One seed of Concord on ``env`` (``args`` added to the command line): the summary
+        line and counts, no decision timeout, a decision every step. Returns the stdout, the
+        summary and the episode."""
+        self.assertTrue(os.path.exists(CONCORD), f"build concord first: {CONCORD}")
+        stdout, result = run_bridge("--policy", "concord", "--seeds", "1", "--concord", CONCORD,
+                                    *args, env=env)
+        s = self.check_summary(stdout, result, "concord", 1, env=env, top=top)
+        self.assertEqual(s["timeouts"], 0, stdout)
+        self.assertEqual(s["decisions"], s["steps"])
+        e = result["episodes"][0]
+        self.assertEqual(e["decisions"], e["steps"])
+        return stdout, result, e
+
+
+class HighwayBridge(BridgeChecks, unittest.TestCase):
     def test_concord_decides_every_step_of_two_seeds(self):
         self.assertTrue(os.path.exists(CONCORD), f"build concord first: {CONCORD}")
         stdout, result = run_bridge("--policy", "concord", "--seeds", "2", "--concord", CONCORD)
@@ -163,16 +181,9 @@ class HighwayBridge(unittest.TestCase):
         self.assertLessEqual(s["minimum_risk_decisions"], s["decisions"])
 
     def test_concord_decides_every_step_of_a_merge_v0_seed(self):
-        self.assertTrue(os.path.exists(CONCORD), f"build concord first: {CONCORD}")
-        stdout, result = run_bridge("--policy", "concord", "--seeds", "1", "--concord", CONCORD,
-                                    env="merge-v0")
-        s = self.check_summary(stdout, result, "concord", 1, env="merge-v0", top=40.0)
-        self.assertEqual(s["timeouts"], 0, stdout)
-        self.assertEqual(s["decisions"], s["steps"])
+        _, result, e = self.concord_seed("merge-v0", 40.0)
         # The default configuration for merge-v0 is deploy/highway-env-merge.toml.
         self.assertTrue(result["args"]["config"].endswith("highway-env-merge.toml"))
-        e = result["episodes"][0]
-        self.assertEqual(e["decisions"], e["steps"])
         self.assertEqual(sum(e["maneuvers"].values()), e["decisions"])
         # The episode ends in a collision, past x = 370 (merge-v0's end) or at the bridge's 40 s.
         self.assertTrue(e["crashed"] or e["sim_time_s"] >= 40.0 - 1e-6
@@ -244,7 +255,7 @@ class HighwayBridge(unittest.TestCase):
         self.assertAlmostEqual(e["sim_time_s"], 3.0, delta=1e-6)
 
 
-class Roundabout(unittest.TestCase):
+class Roundabout(BridgeChecks, unittest.TestCase):
     """roundabout-v0 on the map built from its road network, and intersection-v1 with its own
     action configuration."""
 
@@ -283,13 +294,7 @@ class Roundabout(unittest.TestCase):
         self.assertGreaterEqual(len(ego & ring), 10)
 
     def test_concord_drives_a_roundabout_v0_seed(self):
-        self.assertTrue(os.path.exists(CONCORD), f"build concord first: {CONCORD}")
-        stdout, result = run_bridge("--policy", "concord", "--seeds", "1", "--concord", CONCORD,
-                                    env="roundabout-v0")
-        s = self.check_summary(stdout, result, "concord", 1, env="roundabout-v0", top=16.0)
-        self.assertEqual(s["timeouts"], 0, stdout)
-        e = result["episodes"][0]
-        self.assertEqual(e["decisions"], e["steps"])
+        _, _, e = self.concord_seed("roundabout-v0", 16.0)
         # Seed 0 (tuning): the ego starts 55 m along its route, enters the ring at about 75 m
         # and drives round it without a collision.
         self.assertFalse(e["crashed"], e)
@@ -312,12 +317,7 @@ class Roundabout(unittest.TestCase):
             self.assertEqual(type(env.unwrapped.vehicle).__name__, "BicycleVehicle")
         finally:
             env.close()
-        self.assertTrue(os.path.exists(CONCORD), f"build concord first: {CONCORD}")
-        stdout, result = run_bridge("--policy", "concord", "--seeds", "1", "--duration", "4",
-                                    "--concord", CONCORD, env="intersection-v1")
-        e = result["episodes"][0]
-        self.assertEqual(result["summary"]["timeouts"], 0, stdout)
-        self.assertEqual(e["decisions"], e["steps"])
+        _, _, e = self.concord_seed("intersection-v1", 20.0, "--duration", "4")
         # The ego drives up its approach (x = 2, towards -y) along the planned path.
         self.assertAlmostEqual(e["final_position"][0], 2.0, delta=0.5)
         self.assertLess(e["final_position"][1], 30.0)
@@ -359,8 +359,6 @@ class Roundabout(unittest.TestCase):
                 self.assertAlmostEqual(lane["stop_s_m"], hw[0].length, delta=0.01, msg=lane_id)
         finally:
             env.close()
-
-    check_summary = HighwayBridge.check_summary
 
 
 class Environments(unittest.TestCase):
