@@ -52,13 +52,13 @@ fn main() {
     };
     let (from, to) = (time(2, 0.0), time(3, f64::INFINITY));
     // CONCORD_REPLAY_MAP=FILE (and CONCORD_REPLAY_ROUTE=ID) replays on a map file, e.g. a
-    // trace of bridges/python/sumo_bridge.py; the route's lane replaces the frames'.
-    let (morph, route_lane) = match std::env::var("CONCORD_REPLAY_MAP") {
+    // trace of bridges/python/sumo_bridge.py; the lane of the route's leg replaces the frames'.
+    let (morph, route) = match std::env::var("CONCORD_REPLAY_MAP") {
         Ok(path) => {
             let route = std::env::var("CONCORD_REPLAY_ROUTE").ok();
-            let (map, lane) = concord_map::Map::load_route(path.as_ref(), route.as_deref())
+            let (map, legs) = concord_map::Map::load_route(path.as_ref(), route.as_deref())
                 .unwrap_or_else(|e| panic!("{e}"));
-            (map.morphology(), lane)
+            (map.morphology(), legs)
         }
         Err(_) => (BuiltIn::HighwayEnvIntersection.morphology(), None),
     };
@@ -77,8 +77,11 @@ fn main() {
         let r: serde_json::Value = serde_json::from_str(line).expect("a JSON line of a trace");
         let sc = &r["scene"];
         let t = sc["time"].as_f64().unwrap() * 1e-9;
-        let lane = route_lane.unwrap_or(sc["lane"].as_u64().unwrap() as u8);
-        let mut scene = Scene::new(t, agent(&sc["ego"]), lane);
+        let ego = agent(&sc["ego"]);
+        let lane = route.map_or(sc["lane"].as_u64().unwrap() as u8, |r| {
+            r.lane_at(&morph, ego.pos)
+        });
+        let mut scene = Scene::new(t, ego, lane);
         for a in sc["agents"].as_array().unwrap() {
             scene.push(agent(a));
         }

@@ -191,7 +191,9 @@ enum Command {
         /// deploy/maps/README.md. Overrides the file's `service.map`.
         #[arg(long)]
         map: Option<PathBuf>,
-        /// The ego's route: a lane id of the map, overriding the file's `service.route`.
+        /// The ego's route: a lane id of the map; for SUMO or OpenDRIVE, a movement or
+        /// waypoints joined by '>' (edges, roads or lanes; "A>B" or, across several
+        /// junctions, "A>B>C"). Overrides the file's `service.route`.
         #[arg(long)]
         route: Option<String>,
         /// Decide as soon as a scene arrives (its publisher notifies `scene_ready`), not on the
@@ -252,7 +254,8 @@ enum Command {
         /// Map file: Concord's TOML format (deploy/maps/README.md), a SUMO network (*.net.xml)
         /// or an OpenDRIVE file (*.xodr).
         file: PathBuf,
-        /// The ego's route (for a SUMO network or OpenDRIVE it also selects the movements kept).
+        /// The ego's route, as for `run` (for a SUMO network or OpenDRIVE it also selects the
+        /// movements kept; across several junctions, one lane per junction).
         #[arg(long)]
         route: Option<String>,
         /// Print JSON (lanes with their vertices, conflicts) instead of tables.
@@ -550,8 +553,9 @@ fn load_config(path: Option<&Path>) -> Result<RunConfig, String> {
 
 /// `concord map`: the lanes of a map and the conflicts derived from them.
 fn show_map(file: &Path, route: Option<&str>, json: bool) -> Result<(), String> {
-    let (map, route_lane) = concord_map::Map::load_route(file, route).map_err(|e| e.to_string())?;
+    let (map, legs) = concord_map::Map::load_route(file, route).map_err(|e| e.to_string())?;
     let morph = map.morphology();
+    let on_route = |i: usize| legs.is_some_and(|r| r.lanes().contains(&(i as u8)));
     let turn = |t: concord_core::scene::Turn| format!("{t:?}").to_lowercase();
     // Written as a whole at the end; a closed pipe (`| head`) is not an error.
     let mut out = String::new();
@@ -579,8 +583,22 @@ fn show_map(file: &Path, route: Option<&str>, json: bool) -> Result<(), String> 
                 })
             })
             .collect();
+        // The route's legs: each leg's lane and the arc length on it where the next takes over.
+        let route_legs: Vec<_> = legs
+            .iter()
+            .flat_map(|r| {
+                r.lanes().iter().enumerate().map(|(k, &lane)| {
+                    let handover = r.handover_s(k);
+                    serde_json::json!({
+                        "lane": lane,
+                        "handover_s_m": if k + 1 < r.lanes().len() { Some(handover) } else { None },
+                    })
+                })
+            })
+            .collect();
         let json = serde_json::json!({
-            "name": map.name, "route_lane": route_lane, "lanes": lanes, "conflicts": conflicts,
+            "name": map.name, "route_lane": legs.map(|r| r.first()), "route_legs": route_legs,
+            "lanes": lanes, "conflicts": conflicts,
         });
         let _ = writeln!(out, "{json}");
         let _ = std::io::stdout().write_all(out.as_bytes());
@@ -598,11 +616,7 @@ fn show_map(file: &Path, route: Option<&str>, json: bool) -> Result<(), String> 
         "lane  id                      turn      level  width m  stop s m  length m"
     );
     for (i, (l, id)) in morph.lanes().iter().zip(map.ids()).enumerate() {
-        let mark = if route_lane == Some(i as u8) {
-            "*"
-        } else {
-            " "
-        };
+        let mark = if on_route(i) { "*" } else { " " };
         let _ = writeln!(
             out,
             "{mark}{i:<4} {id:<23} {:<9} {:>5}  {:>7.2}  {:>8.2}  {:>8.2}",
@@ -638,8 +652,21 @@ fn show_map(file: &Path, route: Option<&str>, json: bool) -> Result<(), String> 
             c.zone_b[1]
         );
     }
-    if route.is_some() {
-        let _ = writeln!(out, "* the route's lane");
+    match legs {
+        Some(r) if r.lanes().len() > 1 => {
+            let handovers: Vec<String> = (0..r.lanes().len() - 1)
+                .map(|k| format!("lane {} at s = {:.1} m", r.lanes()[k], r.handover_s(k)))
+                .collect();
+            let _ = writeln!(
+                out,
+                "* the route's legs, one per junction, each handing over to the next: {}",
+                handovers.join(", ")
+            );
+        }
+        Some(_) => {
+            let _ = writeln!(out, "* the route's lane");
+        }
+        None => {}
     }
     let _ = std::io::stdout().write_all(out.as_bytes());
     Ok(())
@@ -686,8 +713,9 @@ fn run(
     let iox_config = iox::init(iox_path).map_err(|e| e.to_string())?;
     let mut core =
         Box::new(DecisionCore::new(cfg.core, loaded.map.morphology()).map_err(|e| e.to_string())?);
-    let route = match (&cfg.service.route, loaded.route_lane) {
-        (Some(id), Some(lane)) => format!(", route {id} (lane {lane})"),
+    let route = match (&cfg.service.route, loaded.route) {
+        (Some(id), Some(r)) if r.lanes().len() == 1 => format!(", route {id} (lane {})", r.first()),
+        (Some(id), Some(r)) => format!(", route {id} (lanes {:?}, one per junction)", r.lanes()),
         _ => String::new(),
     };
     eprintln!(
@@ -707,7 +735,7 @@ fn run(
     core_service::run(
         &mut core,
         &cfg.service,
-        loaded.route_lane,
+        loaded.route,
         &cfg.realtime,
         &iox_config,
         StopAfter {

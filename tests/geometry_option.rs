@@ -142,28 +142,34 @@ fn a_configuration_file_names_its_map_relative_to_itself() {
     assert!(String::from_utf8_lossy(&bad.stderr).contains("no lane \"shoulder\""));
 }
 
-/// `concord run --map` starts on every map shipped in `deploy/maps/` (and its SUMO network and
-/// OpenDRIVE file),
-/// deciding on its tick or on each scene's arrival.
+/// `concord run --map` starts on every map shipped in `deploy/maps/` (and its SUMO networks
+/// and OpenDRIVE files; the corridors with a route across both their junctions), deciding on
+/// its tick or on each scene's arrival.
 #[test]
 fn every_shipped_map_runs() {
     let mut maps: Vec<_> = std::fs::read_dir(maps_dir())
         .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .map(|e| (e.unwrap().path(), None))
+        .filter(|(p, _)| p.extension().is_some_and(|x| x == "toml"))
         .collect();
     maps.sort();
     assert_eq!(maps.len(), 5, "{maps:?}");
-    maps.push(maps_dir().join("sumo/paper.net.xml"));
-    maps.push(maps_dir().join("opendrive/paper.xodr"));
-    for (k, map) in maps.iter().enumerate() {
+    maps.push((maps_dir().join("sumo/paper.net.xml"), None));
+    maps.push((maps_dir().join("opendrive/paper.xodr"), None));
+    maps.push((maps_dir().join("sumo/corridor.net.xml"), Some("SJ1>J2N")));
+    maps.push((maps_dir().join("opendrive/corridor.xodr"), Some("67>62")));
+    for (k, (map, route)) in maps.iter().enumerate() {
         let arrival = k % 2 == 1;
         let mut road = vec!["--map", map.to_str().unwrap()];
+        if let Some(r) = route {
+            road.extend(["--route", r]);
+        }
         if arrival {
             road.push("--on-arrival");
         }
         let (ok, err) = run_briefly(&format!("shipped{k}"), &road);
         assert!(ok, "{}: {err}", map.display());
         assert_eq!(err.contains("deciding on arrival"), arrival, "{err}");
+        assert_eq!(err.contains("one per junction"), route.is_some(), "{err}");
     }
 }

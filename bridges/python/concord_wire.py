@@ -151,6 +151,7 @@ class WireDecision(_Wire):
         ("announce", ctypes.c_uint8),
         ("negotiation", ctypes.c_uint8),
         ("courtesy_rejects", ctypes.c_uint8),
+        ("ego_lane", ctypes.c_uint8),
     ]
 
 

@@ -1,7 +1,7 @@
 """SUMO co-simulation: Concord drives one vehicle in a SUMO network; SUMO's own drivers are the
 other road users.
 
-    python sumo_bridge.py [--net deploy/maps/sumo/paper.net.xml] [--scenario left_turn]
+    python sumo_bridge.py [--scenario left_turn|stream|minor|corridor] [--net NET]
         [--speeds 6,8,10] [--seeds 30] [--first-seed 0] [--policy concord|sumo|both]
         [--duration 40] [--json FILE]
 
@@ -26,14 +26,22 @@ initial speed):
   centre ±5 m, at the same speed, which it holds (its maximum speed is set to it, and its
   Krauss imperfection to 0, so that every braking of it is a reaction);
 * ``stream``: 2–6 such cars, each the next a time headway of 1.5–5 s behind;
-* ``minor``: one car on the minor road northbound (``SC>CN``), which gives way to the ego.
+* ``minor``: one car on the minor road northbound (``SC>CN``), which gives way to the ego;
+* ``corridor``, across two junctions (``deploy/maps/sumo/corridor.net.xml``: two T-junctions
+  80 m apart on one major road; Concord's route ``SJ1>J1J2>J2N`` has one leg per junction):
+  the ego comes from the south arm, 40 m from J1, turns right onto the major road, merging
+  with an eastbound car that reaches J1 about when it does, and turns left into the north arm
+  at J2 across a westbound car that reaches J2 about when it does (both at the initial speed,
+  held as above).
 
-Each episode reports: collision (SUMO's collision check, junctions included), success (the
-ego's rear past the junction within ``--duration``), time to clear (until then), PET between
-the ego and every other vehicle (``pet.PetGrid`` at every step), the largest deceleration of any
-SUMO vehicle within 30 m of the ego, the time the ego stood (below 0.1 m/s) before clearing,
-and its mean speed until then. The summary prints means, the smallest PET and the largest
-deceleration per policy and speed; ``--json`` writes every episode.
+Each episode reports: collision (SUMO's collision check, junctions included; on a lane SUMO
+counts a gap below the follower's ``minGap``, 2.5 m, as one), success (the ego's rear past the
+last junction of its route within ``--duration``), time to clear (until then), PET between the
+ego and every other vehicle (``pet.PetGrid`` at every step, and when the smallest happened),
+the largest deceleration of any SUMO vehicle within 30 m of the ego, the time the ego stood
+(below 0.1 m/s) before clearing, and its mean speed until then. The summary prints means, the
+smallest PET and the largest deceleration per policy and speed; ``--json`` writes every
+episode.
 """
 
 import argparse
@@ -52,15 +60,34 @@ import concord_wire as wire  # noqa: E402
 from concord_link import ConcordProcess, agent_row, sample, wire_agent  # noqa: E402
 from pet import PetGrid  # noqa: E402
 
-DEFAULT_NET = os.path.join(ROOT, "deploy", "maps", "sumo", "paper.net.xml")
+MAPS = os.path.join(ROOT, "deploy", "maps", "sumo")
+DEFAULT_NET = os.path.join(MAPS, "paper.net.xml")
+CORRIDOR_NET = os.path.join(MAPS, "corridor.net.xml")
 # Routes on the paper's junction: the ego's westbound left turn, the priority road eastbound,
-# the minor road northbound. Each approach lane ends 11.5 m from the centre and is 88.5 m long.
+# the minor road northbound. Each approach lane ends 11.5 m from the centre and is 88.5 m long
+# (on the corridor's too).
 EGO_ROUTE = ("EC", "CS")
 PRIORITY_ROUTE = ("WC", "CE")
 MINOR_ROUTE = ("SC", "CN")
 APPROACH_END_M = 88.5
 START_FROM_CENTRE_M = 40.0
 JUNCTION_EDGE_M = 11.5
+# The corridor (two junctions 80 m apart): the ego from the south arm turns right at J1 onto
+# the major road, merging ahead of or behind its eastbound traffic, then left at J2 into the
+# north arm, across its westbound traffic.
+CORRIDOR_EGO_ROUTE = ("SJ1", "J1J2", "J2N")
+CORRIDOR_EAST_ROUTE = ("WJ1", "J1J2", "J2E")
+CORRIDOR_WEST_ROUTE = ("EJ2", "J2J1", "J1W")
+CORRIDOR_GAP_M = 80.0
+# Each scenario's network, the ego's route and the routes of the other cars.
+SCENARIOS = {
+    "left_turn": (DEFAULT_NET, EGO_ROUTE),
+    "stream": (DEFAULT_NET, EGO_ROUTE),
+    "minor": (DEFAULT_NET, EGO_ROUTE),
+    "corridor": (CORRIDOR_NET, CORRIDOR_EGO_ROUTE),
+}
+ROUTES = {"priority": PRIORITY_ROUTE, "minor": MINOR_ROUTE, "east": CORRIDOR_EAST_ROUTE,
+          "west": CORRIDOR_WEST_ROUTE}
 # A SUMO vehicle within this distance of the ego is "near" it for the braking metric, m.
 NEAR_M = 30.0
 # Speed mode for the ego under Concord: no safe-speed, acceleration or right-of-way checks.
@@ -110,10 +137,17 @@ def to_wire(s, agent_id):
 
 def add_traffic(ls, scenario, speed, rng):
     """The scenario's SUMO vehicles; returns their ids."""
-    ls.route.add("priority", list(PRIORITY_ROUTE))
-    ls.route.add("minor", list(MINOR_ROUTE))
+    net = SCENARIOS[scenario][0]
+    for name, edges in ROUTES.items():
+        if (net == CORRIDOR_NET) == (name in ("east", "west")):
+            ls.route.add(name, list(edges))
     first = START_FROM_CENTRE_M + rng.uniform(-5.0, 5.0)
-    if scenario == "minor":
+    if scenario == "corridor":
+        # Eastbound at J1 as the ego gets there; westbound at J2 as the ego gets there, which
+        # is the ego's path to J2 beyond its start further from J2.
+        cars = [("east", first),
+                ("west", START_FROM_CENTRE_M + CORRIDOR_GAP_M + rng.uniform(-15.0, 15.0))]
+    elif scenario == "minor":
         cars = [("minor", first)]
     elif scenario == "left_turn":
         cars = [("priority", first)]
@@ -145,7 +179,7 @@ class ConcordDriver:
     """The ego's speed from Concord, one decision per step in lock-step."""
 
     def __init__(self, args):
-        road = ["--map", args.net, "--route", ">".join(EGO_ROUTE)]
+        road = ["--map", args.net, "--route", ">".join(SCENARIOS[args.scenario][1])]
         self.trace = open(args.trace, "w", encoding="utf-8") if args.trace else None
         self.core_args = (args.concord, road, args.rate, args.config, args.core_log, False, "sumo")
         self.core = None
@@ -209,7 +243,8 @@ class ConcordDriver:
 def run_episode(ls, args, policy, driver, scenario, speed, seed):
     rng = random.Random(seed * 1000 + int(round(speed * 10)))
     ls.load(sumo_args(args.net, seed, args.step))
-    ls.route.add("ego", list(EGO_ROUTE))
+    ego_route = SCENARIOS[scenario][1]
+    ls.route.add("ego", list(ego_route))
     ls.vehicle.add("ego", "ego", depart="now", departPos=f"{start_pos(START_FROM_CENTRE_M):.3f}",
                    departSpeed=f"{speed:.3f}")
     add_traffic(ls, scenario, speed, rng)
@@ -246,7 +281,7 @@ def run_episode(ls, args, policy, driver, scenario, speed, seed):
             if ego[3] < STANDING_MPS:
                 e["standing_s"] += args.step
             road = ls.vehicle.getRoadID("ego")
-            if road == EGO_ROUTE[-1] and ls.vehicle.getLanePosition("ego") > ego[5]:
+            if road == ego_route[-1] and ls.vehicle.getLanePosition("ego") > ego[5]:
                 cleared_at = t
         elif t > cleared_at + args.after_clear:
             break
@@ -260,6 +295,7 @@ def run_episode(ls, args, policy, driver, scenario, speed, seed):
     e["success"] = cleared_at is not None and not e["collision"]
     e["time_to_clear_s"] = cleared_at
     e["min_pet_s"] = None if math.isinf(pet.min_pet) else round(pet.min_pet, 3)
+    e["min_pet_at_s"] = None if pet.min_pet_t is None else round(pet.min_pet_t, 3)
     e["avg_speed_mps"] = round(sum(speeds) / len(speeds), 3) if speeds else None
     e["max_decel_near_mps2"] = round(e["max_decel_near_mps2"], 3)
     e["standing_s"] = round(e["standing_s"], 3)
@@ -305,8 +341,10 @@ def summary_line(r):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--net", default=DEFAULT_NET, help="SUMO network (.net.xml)")
-    ap.add_argument("--scenario", default="left_turn", choices=["left_turn", "stream", "minor"])
+    ap.add_argument("--net", default=None,
+                    help="SUMO network (.net.xml; default: the scenario's, "
+                         "deploy/maps/sumo/paper.net.xml or corridor.net.xml)")
+    ap.add_argument("--scenario", default="left_turn", choices=list(SCENARIOS))
     ap.add_argument("--speeds", default="6,8,10", help="initial speeds, m/s, comma-separated")
     ap.add_argument("--seeds", type=int, default=30, help="episodes per speed and policy")
     ap.add_argument("--first-seed", type=int, default=0,
@@ -328,6 +366,7 @@ def main(argv=None):
     ap.add_argument("--trace", default=None,
                     help="write every frame and decision of Concord's episodes here (JSON lines)")
     args = ap.parse_args(argv)
+    args.net = args.net or SCENARIOS[args.scenario][0]
     if not os.path.exists(args.net):
         ap.error(f"no network {args.net}")
     policies = ["concord", "sumo"] if args.policy == "both" else [args.policy]

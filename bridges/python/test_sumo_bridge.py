@@ -17,7 +17,8 @@ CONCORD = os.environ.get("CONCORD_BIN", os.path.join(sb.ROOT, "target", "release
 
 
 def args(**kw):
-    ns = sb.argparse.Namespace(net=sb.DEFAULT_NET, step=0.05, radius=100.0, duration=20.0,
+    ns = sb.argparse.Namespace(net=sb.DEFAULT_NET, scenario="left_turn", step=0.05,
+                               radius=100.0, duration=20.0,
                                after_clear=0.5, concord=CONCORD, config=None, rate=100.0,
                                timeout=2.0, core_log=None, trace=None)
     for k, v in kw.items():
@@ -71,6 +72,42 @@ class SumoBridge(unittest.TestCase):
         self.assertIsNotNone(e["min_pet_s"])
         self.assertLess(e["time_to_clear_s"], a.duration)
 
+    def test_a_route_across_two_junctions_hands_over_from_leg_to_leg(self):
+        """The corridor (two junctions): Concord drives the route SJ1>J1J2>J2N through both,
+        on its first leg's lane (lane 0) up to J1 and its second's (lane 1) from the link on."""
+
+        class Recording(sb.ConcordDriver):
+            def __init__(self, a):
+                super().__init__(a)
+                self.lanes = []
+
+            def reset(self):
+                super().reset()
+                wait = self.core.link.wait_for_decision
+
+                def recorded(*a, **kw):
+                    d = wait(*a, **kw)
+                    if d is not None:
+                        self.lanes.append(d.ego_lane)
+                    return d
+
+                self.core.link.wait_for_decision = recorded
+
+        a = args(net=sb.CORRIDOR_NET, scenario="corridor", duration=40.0)
+        driver = Recording(a)
+        try:
+            e = sb.run_episode(self.ls, a, "concord", driver, "corridor", 8.0, 0)
+        finally:
+            driver.close()
+        self.assertFalse(e["collision"], e)
+        self.assertTrue(e["success"], e)
+        self.assertEqual(e["decisions_missed"], 0, e)
+        lanes = driver.lanes
+        self.assertEqual(lanes[0], 0)
+        self.assertEqual(lanes[-1], 1)
+        self.assertEqual(lanes, sorted(lanes), "one handover, never back")
+        self.assertGreater(lanes.count(1), 100)
+
     def test_the_map_concord_loads_is_the_network_sumo_reports(self):
         out = subprocess.run([CONCORD, "map", sb.DEFAULT_NET, "--route", "EC>CS", "--json"],
                              capture_output=True, text=True, check=True)
@@ -78,6 +115,7 @@ class SumoBridge(unittest.TestCase):
         self.assertEqual(m["route_lane"], 0)
         lanes = {lane["id"]: lane for lane in m["lanes"]}
         ls = self.ls
+        ls.load(sb.sumo_args(sb.DEFAULT_NET, 0, 0.05))  # another test may have loaded another
         expected = set()
         for incoming in ls.lane.getIDList():
             if incoming.startswith(":"):

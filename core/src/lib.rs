@@ -137,6 +137,9 @@ pub struct Decision {
     /// Maneuvers refused this cycle because they would make another road user brake harder
     /// than `max_imposed_decel_mps2`.
     pub courtesy_rejects: u8,
+    /// Lane the ego drove on: the scene's `ego_lane` (with a route across several junctions,
+    /// the leg it was on).
+    pub ego_lane: u8,
     pub trajectory: Trajectory,
     /// Monte Carlo statistics of the executed plan.
     pub plan: PlanStats,
@@ -359,6 +362,7 @@ impl DecisionCore {
             p_corrected: self.choice.p_corrected,
             negotiation: self.negotiation.phase,
             courtesy_rejects: self.choice.courtesy_rejected.iter().filter(|r| **r).count() as u8,
+            ego_lane: scene.ego_lane,
             ..Decision::default()
         };
         // Eq. 16: the advice is tried first; its safety check is a full planning run. An
@@ -635,6 +639,7 @@ impl DecisionCore {
         let mut d = Decision {
             cycle: self.last.cycle,
             request_id: self.last.request_id,
+            ego_lane: self.ego_lane,
             scene_time_s: self.last.scene_time_s,
             maneuver: Maneuver::Decelerate,
             logit_maneuver: self.last.logit_maneuver,

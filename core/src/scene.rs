@@ -23,6 +23,14 @@ pub const LANE_EXTENSION_M: f64 = 50.0;
 /// agent's turn signal: where lanes overlap the signal decides, where they are apart the
 /// position does.
 pub const SIGNAL_MISMATCH_M: f64 = 1.0;
+/// A lane whose first vertex lies within this distance of another's reference line starts
+/// on it, m.
+pub const BRANCH_TOLERANCE_M: f64 = 0.5;
+/// A lane that starts on another heads along it when its first segment is within this angle
+/// of the other's tangent there, rad (30°).
+pub const BRANCH_HEADING_RAD: f64 = core::f64::consts::FRAC_PI_6;
+/// Most junctions one route passes ([`Route`]).
+pub const MAX_ROUTE_LEGS: usize = 4;
 /// Samples kept per agent history ring: 2 s at 10 Hz.
 pub const HISTORY_LEN: usize = 20;
 /// Spacing of history samples, s (10 Hz).
@@ -915,9 +923,10 @@ pub struct Morphology {
 }
 
 impl Morphology {
-    /// Builds a morphology and finds every conflict point between lanes that do not share
-    /// their start (lanes of one approach diverge rather than conflict); equal priority levels
-    /// are first come first served.
+    /// Builds a morphology and finds every conflict point between lanes where neither
+    /// branches off the other (lanes of one approach, or a lane that starts on another and
+    /// runs along it, diverge rather than conflict: a road user ahead on the shared stretch is
+    /// a leader); equal priority levels are first come first served.
     pub fn new(lanes: &[Lane]) -> Result<Self, GeometryError> {
         Self::with_rule(lanes, JunctionRule::Levels)
     }
@@ -941,7 +950,11 @@ impl Morphology {
         m.lanes[..lanes.len()].copy_from_slice(lanes);
         for a in 0..lanes.len() {
             for b in a + 1..lanes.len() {
-                if lanes[a].points[0].minus(lanes[b].points[0]).norm() < 0.5 {
+                let same_start = lanes[a].points[0].minus(lanes[b].points[0]).norm();
+                if same_start < BRANCH_TOLERANCE_M
+                    || branches_off(&lanes[a], &lanes[b])
+                    || branches_off(&lanes[b], &lanes[a])
+                {
                     continue;
                 }
                 if let Some((s_a, s_b, pos)) = first_contact(&lanes[a], &lanes[b]) {
@@ -1063,7 +1076,8 @@ impl Morphology {
 
     /// Lane that best explains an agent's pose: within the lane boundary (from
     /// [`LANE_EXTENSION_M`] before its first vertex to its end) and heading within
-    /// `max_heading_err` rad of the tangent; the smallest |l| wins, and a lane whose turn
+    /// `max_heading_err` rad of the tangent; the smallest |l| (plus, behind the first vertex,
+    /// the distance to it) wins, and a lane whose turn
     /// contradicts a left or right `signal` counts as [`SIGNAL_MISMATCH_M`] further away (lanes
     /// of one approach overlap until they diverge, so there the signal decides; without a
     /// signal, or with hazard lights, the lowest index wins ties). Returns (lane, Frenet).
@@ -1094,13 +1108,94 @@ impl Morphology {
                 continue;
             }
             let mismatch = shown.is_some_and(|turn| turn != lane.turn);
-            let cost = f.l.abs() + if mismatch { SIGNAL_MISMATCH_M } else { 0.0 };
+            // Behind the first vertex, the distance along the extension counts too: a lane
+            // the agent is on beats one it would be on only if that lane reached back further.
+            let cost = f.l.abs() + (-f.s).max(0.0) + if mismatch { SIGNAL_MISMATCH_M } else { 0.0 };
             if best.is_none_or(|(_, _, b)| cost < b - 1e-9) {
                 best = Some((i as u8, f, cost));
             }
         }
         best.map(|(i, f, _)| (i, f))
     }
+}
+
+/// The ego's route across one or more junctions, as lanes of a morphology: one *leg* per
+/// junction, each leg's lane the rest of the route from that junction's approach on (so the
+/// junctions further along are in view from the first), with its stop line and its turn.
+/// The ego drives on a leg until it has passed the leg's handover arc length (where it has
+/// cleared the leg's junction), then on the next.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Route {
+    lanes: [u8; MAX_ROUTE_LEGS],
+    /// Arc length on each leg's lane past which the next leg takes over, m.
+    handover_s: [f64; MAX_ROUTE_LEGS],
+    n: usize,
+}
+
+impl Route {
+    /// A route of one lane.
+    pub fn single(lane: u8) -> Route {
+        Route {
+            lanes: [lane; MAX_ROUTE_LEGS],
+            handover_s: [f64::INFINITY; MAX_ROUTE_LEGS],
+            n: 1,
+        }
+    }
+
+    /// A route of `legs`, each (lane, handover arc length on it in m; the last one's is
+    /// unused); `None` when there are none or more than [`MAX_ROUTE_LEGS`].
+    pub fn new(legs: &[(u8, f64)]) -> Option<Route> {
+        if legs.is_empty() || legs.len() > MAX_ROUTE_LEGS {
+            return None;
+        }
+        let mut r = Route::single(legs[0].0);
+        for (k, &(lane, handover)) in legs.iter().enumerate() {
+            r.lanes[k] = lane;
+            r.handover_s[k] = handover;
+        }
+        r.n = legs.len();
+        Some(r)
+    }
+
+    /// The legs' lanes, in driving order.
+    pub fn lanes(&self) -> &[u8] {
+        &self.lanes[..self.n]
+    }
+
+    /// The lane of the first leg.
+    pub fn first(&self) -> u8 {
+        self.lanes[0]
+    }
+
+    /// Arc length on leg `k`'s lane past which the next leg takes over, m.
+    pub fn handover_s(&self, k: usize) -> f64 {
+        self.handover_s[k]
+    }
+
+    /// The lane of the leg an ego at `pos` drives on: the first whose handover it has not
+    /// passed (the first leg for a position that is not finite, which the step refuses).
+    pub fn lane_at(&self, morph: &Morphology, pos: Vec2) -> u8 {
+        if !pos.is_finite() {
+            return self.lanes[0];
+        }
+        (0..self.n - 1)
+            .find(|&k| morph.lane(self.lanes[k]).project(pos).s <= self.handover_s[k])
+            .map_or(self.lanes[self.n - 1], |k| self.lanes[k])
+    }
+}
+
+/// Whether `b` branches off `a`: its first vertex lies on `a`'s reference line (within
+/// [`BRANCH_TOLERANCE_M`], from `a`'s start to its end) heading along it (within
+/// [`BRANCH_HEADING_RAD`]). Lanes of one approach, and a route's leg that continues another
+/// (the rest of the route from a later junction on), branch off each other.
+fn branches_off(a: &Lane, b: &Lane) -> bool {
+    let f = a.project(b.points[0]);
+    if f.l.abs() > BRANCH_TOLERANCE_M || f.s < -BRANCH_TOLERANCE_M || f.s > a.length() {
+        return false;
+    }
+    let t = Vec2::from_angle(f.tangent);
+    let d = b.points[1].minus(b.points[0]);
+    atan2(t.cross(d), t.dot(d)).abs() <= BRANCH_HEADING_RAD
 }
 
 /// First point along `a` where it touches `b`: (s on a, s on b, point).

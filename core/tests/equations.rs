@@ -1641,3 +1641,24 @@ fn request_log_keeps_requests_by_time() {
     assert!(log.due(0.07 + 0.026, 0.05));
     assert!(log.due(0.01, 0.05), "the clock went back");
 }
+
+#[test]
+fn eq2_a_lane_branching_off_another_is_no_conflict_one_starting_across_it_is() {
+    use concord_core::scene::{ConflictKind, Lane};
+    let lane = |pts: &[(f64, f64)]| {
+        let pts: Vec<Vec2> = pts.iter().map(|&(x, y)| Vec2::new(x, y)).collect();
+        Lane::new(&pts, 2.5, 10.0, Turn::Straight).unwrap()
+    };
+    let main = lane(&[(0.0, 0.0), (100.0, 0.0)]);
+    // Starts 40 m along the main lane, runs along it for 20 m, then turns off: a branch.
+    let branch = lane(&[(40.0, 0.0), (60.0, 0.0), (70.0, 20.0)]);
+    // Starts on the main lane's line too, but heading across it (60° off): it crosses there.
+    let across = lane(&[(50.0, 0.0), (60.0, 17.3)]);
+    let m = Morphology::new(&[main, branch, across]).unwrap();
+    assert!(m.conflict(0, 1).is_none(), "{:?}", m.conflict(0, 1));
+    let c = m
+        .conflict(0, 2)
+        .expect("a lane starting across the main lane conflicts");
+    assert_eq!(c.kind, ConflictKind::Crossing);
+    assert!((c.s_a - 50.0).abs() < 1e-6, "{}", c.s_a);
+}

@@ -139,7 +139,8 @@ fn main() {
             fallback,
             announce,
             negotiation,
-            courtesy_rejects
+            courtesy_rejects,
+            ego_lane
         }),
         layout!(WireProcess {
             dist_to_stop_m,

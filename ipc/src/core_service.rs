@@ -22,7 +22,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use concord_core::negotiation::Phase;
-use concord_core::scene::{Scene, SceneErrorKind};
+use concord_core::scene::{Route, Scene, SceneErrorKind};
 use concord_core::{Advice, AdviceVerdict, DecisionCore, FallbackReason, Params};
 use concord_map::{BuiltIn, Map, MapError};
 use hdrhistogram::Histogram;
@@ -83,12 +83,13 @@ pub enum DecideOn {
     Arrival,
 }
 
-/// The road the core drives on: a map, and the ego's route lane when one is configured.
+/// The road the core drives on: a map, and the ego's route when one is configured.
 #[derive(Debug, Clone)]
 pub struct Road {
     pub map: Map,
-    /// Replaces every scene frame's `ego_route_lane` (`service.route`).
-    pub route_lane: Option<u8>,
+    /// Replaces every scene frame's `ego_route_lane` with the lane of the route's leg the ego
+    /// is on (`service.route`).
+    pub route: Option<Route>,
 }
 
 /// Loop settings of the core process.
@@ -115,9 +116,10 @@ pub struct ServiceConfig {
     /// A map file, replacing `geometry`: Concord's TOML format (`deploy/maps/README.md`), a
     /// SUMO network (`*.net.xml`) or an OpenDRIVE file (`*.xodr`).
     pub map: Option<PathBuf>,
-    /// The ego's route: the id of a lane of the map (of a SUMO network, a movement
-    /// "incoming lane>outgoing lane" or "incoming edge>outgoing edge"). Scene frames then need
-    /// not name it: their `ego_route_lane` is replaced by this lane's index.
+    /// The ego's route: the id of a lane of the map (of a SUMO network or OpenDRIVE, a
+    /// movement "incoming lane>outgoing lane", "incoming edge>outgoing edge", or waypoints
+    /// through several junctions, "a>b>c"). Scene frames then need not name it: their
+    /// `ego_route_lane` is replaced by the lane of the route's leg the ego is on.
     pub route: Option<String>,
     /// Intents parsed by the sidecar from language apply for this long after the advice that
     /// carried them, s.
@@ -146,7 +148,7 @@ impl ServiceConfig {
     /// Loads the configured map (`map`, else the built-in `geometry`) and resolves `route`.
     pub fn road(&self) -> Result<Road, String> {
         let route = |e: MapError| format!("service.route: {e}");
-        let (map, route_lane) = match &self.map {
+        let (map, route) = match &self.map {
             Some(path) => {
                 Map::load_route(path, self.route.as_deref()).map_err(|e| e.to_string())?
             }
@@ -157,7 +159,7 @@ impl ServiceConfig {
                 .with_route(self.route.as_deref())
                 .map_err(route)?,
         };
-        Ok(Road { map, route_lane })
+        Ok(Road { map, route })
     }
 }
 
@@ -271,7 +273,7 @@ struct Ports {
 struct Loop<'a> {
     core: &'a mut DecisionCore,
     cfg: &'a ServiceConfig,
-    route_lane: Option<u8>,
+    route: Option<Route>,
     ports: Ports,
     notifier: Notifier,
     stats: CoreStats,
@@ -299,23 +301,23 @@ struct Loop<'a> {
 
 /// Runs the core loop until SIGINT, SIGTERM or `stop`; returns the final statistics.
 ///
-/// `route_lane`, when given, replaces every frame's `ego_route_lane` ([`Road::route_lane`]).
+/// `route`, when given, replaces every frame's `ego_route_lane` ([`Road::route`]).
 pub fn run(
     core: &mut DecisionCore,
     cfg: &ServiceConfig,
-    route_lane: Option<u8>,
+    route: Option<Route>,
     rt: &RealtimeConfig,
     iox_config: &Config,
     stop: StopAfter,
 ) -> Result<CoreStats, IpcError> {
-    run_observed(core, cfg, route_lane, rt, iox_config, stop, |_| {})
+    run_observed(core, cfg, route, rt, iox_config, stop, |_| {})
 }
 
 /// [`run`], calling `observe` with the counters after every tick (on the loop thread).
 pub fn run_observed(
     core: &mut DecisionCore,
     cfg: &ServiceConfig,
-    route_lane: Option<u8>,
+    route: Option<Route>,
     rt: &RealtimeConfig,
     iox_config: &Config,
     stop: StopAfter,
@@ -351,7 +353,7 @@ pub fn run_observed(
     let mut state = Loop {
         core,
         cfg,
-        route_lane,
+        route,
         ports,
         notifier: Notifier::from_env(),
         stats: CoreStats {
@@ -536,8 +538,8 @@ impl Loop<'_> {
             Ok(s) => s,
             Err(_) => return self.reject(FrameReject::BadCode),
         };
-        if let Some(lane) = self.route_lane {
-            scene.ego_lane = lane;
+        if let Some(route) = &self.route {
+            scene.ego_lane = route.lane_at(self.core.morphology(), scene.ego.pos);
         }
         self.intents.apply(&mut scene, rx);
         let started = now_ns();

@@ -326,6 +326,9 @@ pub struct WireDecision {
     pub negotiation: u8,
     /// Maneuvers refused for courtesy in this decision.
     pub courtesy_rejects: u8,
+    /// Index of the lane the ego drove on (with a route across several junctions, the leg it
+    /// was on; `concord map --route` lists them).
+    pub ego_lane: u8,
 }
 
 impl WireDecision {
@@ -366,6 +369,7 @@ impl WireDecision {
             announce: d.announce as u8,
             negotiation: d.negotiation as u8,
             courtesy_rejects: d.courtesy_rejects,
+            ego_lane: d.ego_lane,
         }
     }
 

@@ -111,7 +111,7 @@ fn run_fed(
     let stats = core_service::run(
         &mut core,
         &cfg,
-        road.route_lane,
+        road.route,
         &RealtimeConfig::default(),
         &config,
         StopAfter {

@@ -18,7 +18,7 @@ use std::fmt;
 use std::path::Path;
 
 use concord_core::scene::{
-    GeometryError, JunctionRule, Lane, Morphology, Turn, Vec2, MAX_CONFLICTS, MAX_LANES,
+    GeometryError, JunctionRule, Lane, Morphology, Route, Turn, Vec2, MAX_CONFLICTS, MAX_LANES,
     MAX_LANE_POINTS,
 };
 use serde::Deserialize;
@@ -61,10 +61,11 @@ impl Map {
         Map::load_route(path, None).map(|(map, _)| map)
     }
 
-    /// [`Map::load`], and the index of the ego's `route`: a lane id (for a SUMO network, a
-    /// movement id or `"{incoming edge}>{outgoing edge}"`, for OpenDRIVE one or
-    /// `"{incoming road}>{outgoing road}"`; either also selects the movements that are kept).
-    pub fn load_route(path: &Path, route: Option<&str>) -> Result<(Map, Option<u8>), MapError> {
+    /// [`Map::load`], and the ego's `route`: a lane id; for a SUMO network or OpenDRIVE, a
+    /// movement id or waypoints joined by `>` (edges or lanes, roads or lanes:
+    /// `"{incoming edge}>{outgoing edge}"`, or through several junctions `"{a}>{b}>{c}"`),
+    /// which also selects the movements that are kept.
+    pub fn load_route(path: &Path, route: Option<&str>) -> Result<(Map, Option<Route>), MapError> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| MapError(format!("cannot read map {}: {e}", path.display())))?;
         let origin = path.display().to_string();
@@ -77,10 +78,10 @@ impl Map {
         Map::parse(&text, &origin)?.with_route(route)
     }
 
-    /// The map and the index of the lane `route` names, if any.
-    pub fn with_route(self, route: Option<&str>) -> Result<(Map, Option<u8>), MapError> {
+    /// The map and the route of the one lane `route` names, if any.
+    pub fn with_route(self, route: Option<&str>) -> Result<(Map, Option<Route>), MapError> {
         let lane = route.map(|id| self.lane_index(id)).transpose()?;
-        Ok((self, lane))
+        Ok((self, lane.map(Route::single)))
     }
 
     /// A map of `lanes` with their ids and successors (indices), checked against the core's

@@ -14,11 +14,11 @@
 //! connecting road `low` yields to `high`); otherwise, as OpenDRIVE files seldom state it,
 //! first come, first served. (SUMO's `netconvert --opendrive-files` derives a junction's right
 //! of way from its roads; `deploy/maps/README.md` shows that path.) Straight movements come
-//! first in the lane order, then right and left turns; with a route, the route's movement is
-//! lane 0 and only the movements of junctions within [`RELEVANT_RADIUS_M`] of its junction are
-//! kept.
+//! first in the lane order, then right and left turns; with a route (also waypoints across
+//! several junctions, `"{road}>{road}>{road}"`), the route's legs come first and only the
+//! movements of junctions within [`RELEVANT_RADIUS_M`] of its junctions are kept.
 
-use concord_core::scene::{RightOfWay, Turn, Vec2};
+use concord_core::scene::{RightOfWay, Route, Turn, Vec2};
 use xodr::{Direction, LaneId};
 
 #[cfg(doc)]
@@ -72,9 +72,14 @@ fn turn_between(a: Vec2, b: Vec2) -> f64 {
     a.cross(b).atan2(a.x * b.x + a.y * b.y)
 }
 
-/// Parses an OpenDRIVE file and keeps the movements near `route` (a movement id or
-/// `"{incoming road}>{outgoing road}"`); `origin` names the file in errors.
-pub fn parse(text: &str, origin: &str, route: Option<&str>) -> Result<(Map, Option<u8>), MapError> {
+/// Parses an OpenDRIVE file and keeps the movements near `route` (a movement id, or waypoints
+/// joined by `>`: roads or lanes, e.g. `"{incoming road}>{outgoing road}"`); `origin` names
+/// the file in errors.
+pub fn parse(
+    text: &str,
+    origin: &str,
+    route: Option<&str>,
+) -> Result<(Map, Option<Route>), MapError> {
     let err = |msg: String| MapError(format!("map {origin}: {msg}"));
     let net = xodr::load_str(text).map_err(|e| err(format!("not OpenDRIVE: {e}")))?;
     let lane_name = |id: LaneId| -> Option<(String, String, Option<String>)> {
@@ -167,6 +172,9 @@ pub fn parse(text: &str, origin: &str, route: Option<&str>) -> Result<(Map, Opti
                     id: format!("{from_name}>{to_name}"),
                     from: from_road,
                     to: to_road,
+                    from_lane: from_name,
+                    to_lane: to_name,
+                    exit: pieces[2][0],
                     junction: junction.clone(),
                     turn,
                     points,
@@ -181,30 +189,24 @@ pub fn parse(text: &str, origin: &str, route: Option<&str>) -> Result<(Map, Opti
         return Err(err("no drivable lane through a junction".into()));
     }
     let centres = stop_line_centres(&movements);
-    let (mut map, route_lane, keep) = assemble(
+    // The junctions' <priority> elements, between the connecting roads of one junction.
+    let row = |a: usize, b: usize| -> Option<RightOfWay> {
+        let yields = |x: usize, y: usize| {
+            net.yields_to(connecting_roads[x])
+                .any(|r| r == connecting_roads[y])
+        };
+        match (yields(a, b), yields(b, a)) {
+            (true, false) => Some(RightOfWay::B),
+            (false, true) => Some(RightOfWay::A),
+            _ => None,
+        }
+    };
+    assemble(
         &movements,
         |j| centres.get(j).copied(),
         route,
         "\"incoming road_lane>outgoing road_lane\" or \"incoming road>outgoing road\"",
         origin,
-    )?;
-    // The junctions' <priority> elements, between the connecting roads of one junction.
-    for (a, &ia) in keep.iter().enumerate() {
-        for (b, &ib) in keep.iter().enumerate().skip(a + 1) {
-            if movements[ia].junction != movements[ib].junction {
-                continue;
-            }
-            let yields = |x: usize, y: usize| {
-                net.yields_to(connecting_roads[x])
-                    .any(|r| r == connecting_roads[y])
-            };
-            let row = match (yields(ia, ib), yields(ib, ia)) {
-                (true, false) => RightOfWay::B,
-                (false, true) => RightOfWay::A,
-                _ => continue,
-            };
-            map.morphology.set_right_of_way(a as u8, b as u8, row);
-        }
-    }
-    Ok((map, route_lane))
+        &row,
+    )
 }

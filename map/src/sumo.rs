@@ -18,15 +18,16 @@
 //!
 //! Straight movements come first in the lane order, then right and left turns (an agent without
 //! a turn signal matches the lowest index on a shared approach, and SUMO's vehicles show
-//! blinkers only to turn); with a route, the route's movement is lane 0.
+//! blinkers only to turn); with a route, the route's legs come first (one lane per junction it
+//! passes, see `concord_core::scene::Route`).
 //!
 //! Only movements near the ego's route are kept (the core holds at most
-//! [`MAX_LANES`](concord_core::scene::MAX_LANES)): those of the route's junction and of every
-//! junction within [`RELEVANT_RADIUS_M`] of it. Without a route, every movement is kept.
+//! [`MAX_LANES`](concord_core::scene::MAX_LANES)): those of the route's junctions and of every
+//! junction within [`RELEVANT_RADIUS_M`] of one. Without a route, every movement is kept.
 
 use std::collections::HashMap;
 
-use concord_core::scene::{RightOfWay, Turn, Vec2};
+use concord_core::scene::{RightOfWay, Route, Turn, Vec2};
 
 pub use crate::movements::RELEVANT_RADIUS_M;
 use crate::movements::{assemble, Movement};
@@ -108,9 +109,14 @@ fn thin(points: &[(Vec2, bool)]) -> Vec<Vec2> {
     out.into_iter().map(|(p, _)| p).collect()
 }
 
-/// Parses a SUMO network and keeps the movements near `route` (a movement id or
-/// `"{incoming edge}>{outgoing edge}"`); `origin` names the file in errors.
-pub fn parse(text: &str, origin: &str, route: Option<&str>) -> Result<(Map, Option<u8>), MapError> {
+/// Parses a SUMO network and keeps the movements near `route` (a movement id, or waypoints
+/// joined by `>`: edges or lanes, e.g. `"{incoming edge}>{outgoing edge}"`); `origin` names
+/// the file in errors.
+pub fn parse(
+    text: &str,
+    origin: &str,
+    route: Option<&str>,
+) -> Result<(Map, Option<Route>), MapError> {
     let err = |msg: String| MapError(format!("map {origin}: {msg}"));
     let doc = roxmltree::Document::parse(text).map_err(|e| err(format!("not XML: {e}")))?;
     let net = doc.root_element();
@@ -268,10 +274,13 @@ pub fn parse(text: &str, origin: &str, route: Option<&str>) -> Result<(Map, Opti
             id: format!("{from_lane}>{to_lane}"),
             from: from_edge,
             to: to_edge,
+            from_lane: from_lane.clone(),
+            to_lane: to_lane.clone(),
             junction,
             turn,
             points,
             stop_s,
+            exit: outgoing[0],
             width: incoming.width,
         });
         vias.push(via);
@@ -279,38 +288,27 @@ pub fn parse(text: &str, origin: &str, route: Option<&str>) -> Result<(Map, Opti
     if movements.is_empty() {
         return Err(err("no connection through a junction".into()));
     }
-    let (mut map, route_lane, keep) = assemble(
-        &movements,
-        |j| junctions.get(j).map(|j| j.centre),
-        route,
-        "\"incoming lane>outgoing lane\" or \"incoming edge>outgoing edge\"",
-        origin,
-    )?;
     // SUMO's right of way between the movements of one junction.
     let link = |i: usize| -> Option<usize> {
         let j = junctions.get(&movements[i].junction)?;
         j.int_lanes.iter().position(|l| vias[i].contains(l))
     };
-    for (a, &ia) in keep.iter().enumerate() {
-        for (b, &ib) in keep.iter().enumerate().skip(a + 1) {
-            let (ma, mb) = (&movements[ia], &movements[ib]);
-            if ma.junction != mb.junction {
-                continue;
-            }
-            let (Some(la), Some(lb), Some(j)) = (link(ia), link(ib), junctions.get(&ma.junction))
-            else {
-                continue;
-            };
-            let yields = |x: usize, y: usize| {
-                j.responses.get(x).and_then(|r| r.get(y)).copied() == Some(true)
-            };
-            let row = match (yields(la, lb), yields(lb, la)) {
-                (true, false) => RightOfWay::B,
-                (false, true) => RightOfWay::A,
-                _ => RightOfWay::Neither,
-            };
-            map.morphology.set_right_of_way(a as u8, b as u8, row);
-        }
-    }
-    Ok((map, route_lane))
+    let row = |a: usize, b: usize| -> Option<RightOfWay> {
+        let (la, lb, j) = (link(a)?, link(b)?, junctions.get(&movements[a].junction)?);
+        let yields =
+            |x: usize, y: usize| j.responses.get(x).and_then(|r| r.get(y)).copied() == Some(true);
+        Some(match (yields(la, lb), yields(lb, la)) {
+            (true, false) => RightOfWay::B,
+            (false, true) => RightOfWay::A,
+            _ => RightOfWay::Neither,
+        })
+    };
+    assemble(
+        &movements,
+        |j| junctions.get(j).map(|j| j.centre),
+        route,
+        "\"incoming lane>outgoing lane\" or \"incoming edge>outgoing edge\"",
+        origin,
+        &row,
+    )
 }

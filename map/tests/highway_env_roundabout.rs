@@ -11,7 +11,7 @@ fn roundabout() -> (Map, u8) {
     let path =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/maps/highway-env-roundabout.toml");
     let (map, route) = Map::load_route(&path, Some("ego")).expect("the shipped roundabout loads");
-    (map, route.expect("the ego's route"))
+    (map, route.expect("the ego's route").first())
 }
 
 fn lane(map: &Map, id: &str) -> u8 {

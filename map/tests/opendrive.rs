@@ -1,7 +1,8 @@
 //! OpenDRIVE files: the paper's junction as OpenDRIVE (`deploy/maps/opendrive/paper.xodr`,
 //! written by netconvert from the SUMO network, `deploy/maps/sumo/build.sh`) loads as the same
 //! twelve movements as the SUMO network, lying on its lanes; a junction's `<priority>` sets the
-//! right of way; broken files are errors that name the file.
+//! right of way; a route across the two junctions of `corridor.xodr` has the legs the SUMO
+//! network has; broken files are errors that name the file.
 
 use std::path::{Path, PathBuf};
 
@@ -22,7 +23,9 @@ fn xodr_text() -> String {
 fn load_text(text: &str, name: &str, route: Option<&str>) -> Result<(Map, Option<u8>), String> {
     let path = std::env::temp_dir().join(format!("{name}-{}.xodr", std::process::id()));
     std::fs::write(&path, text).unwrap();
-    let got = Map::load_route(&path, route).map_err(|e| e.0);
+    let got = Map::load_route(&path, route)
+        .map(|(map, r)| (map, r.map(|r| r.first())))
+        .map_err(|e| e.0);
     let _ = std::fs::remove_file(&path);
     got
 }
@@ -93,11 +96,11 @@ fn the_paper_junction_has_the_sumo_networks_movements_on_its_lanes() {
 #[test]
 fn a_route_by_roads_keeps_its_junction_and_comes_first() {
     let (map, route) = Map::load_route(&shipped("opendrive/paper.xodr"), Some("54>52")).unwrap();
-    assert_eq!(route, Some(0));
+    assert_eq!(route.map(|r| r.lanes().to_vec()), Some(vec![0]));
     assert_eq!(map.ids()[0], "54_-1>52_-1");
     assert_eq!(map.morphology().lane(0).turn, Turn::Left);
     let err = Map::load_route(&shipped("opendrive/paper.xodr"), Some("54>54")).unwrap_err();
-    assert!(err.0.contains("no movement \"54>54\""), "{}", err.0);
+    assert!(err.0.contains("no route \"54>54\""), "{}", err.0);
 }
 
 #[test]
@@ -155,4 +158,42 @@ fn broken_files_are_errors_naming_the_file() {
         err.contains("plain-road-") && err.contains("no drivable lane through a junction"),
         "{err}"
     );
+}
+
+#[test]
+fn a_route_across_two_junctions_has_the_legs_the_sumo_network_has() {
+    // corridor.xodr is netconvert's OpenDRIVE of sumo/corridor.net.xml: road 67 is the south
+    // arm, 65 the link from J1 to J2, 62 the north arm.
+    let (xodr, route) =
+        Map::load_route(&shipped("opendrive/corridor.xodr"), Some("67>62")).unwrap();
+    let (sumo, sumo_route) =
+        Map::load_route(&shipped("sumo/corridor.net.xml"), Some("SJ1>J2N")).unwrap();
+    let (route, sumo_route) = (route.unwrap(), sumo_route.unwrap());
+    assert_eq!(route.lanes(), &[0, 1]);
+    assert_eq!(&xodr.ids()[..2], ["67_-1>65_-1>62_-1", "65_-1>62_-1"]);
+    let (x, s) = (xodr.morphology(), sumo.morphology());
+    for leg in [0, 1] {
+        let (a, b) = (x.lane(leg), s.lane(leg));
+        assert_eq!(a.turn, b.turn);
+        assert!(
+            (a.stop_s - b.stop_s).abs() < 0.05,
+            "{} {}",
+            a.stop_s,
+            b.stop_s
+        );
+        assert!(
+            (a.length() - b.length()).abs() < 0.5,
+            "{} {}",
+            a.length(),
+            b.length()
+        );
+        let conflicts = |m: &concord_core::scene::Morphology| {
+            m.conflicts()
+                .iter()
+                .filter(|c| c.lane_a == leg || c.lane_b == leg)
+                .count()
+        };
+        assert_eq!(conflicts(&x), conflicts(&s), "leg {leg}");
+    }
+    assert!((route.handover_s(0) - sumo_route.handover_s(0)).abs() < 0.5);
 }

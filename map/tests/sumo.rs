@@ -21,7 +21,7 @@ fn on_lane(map: &Map, lane: u8, p: Vec2) -> bool {
 #[test]
 fn every_connection_becomes_a_movement_through_its_internal_lanes() {
     let (map, route) = Map::load_route(&paper(), Some("EC>CS")).unwrap();
-    assert_eq!(route, Some(0));
+    assert_eq!(route.map(|r| r.lanes().to_vec()), Some(vec![0]));
     assert_eq!(map.ids()[0], "EC_0>CS_0");
     assert_eq!(
         map.ids().len(),
@@ -103,8 +103,11 @@ fn a_route_keeps_the_junctions_near_it_and_beyond_a_capacity_is_an_error() {
     // Junctions are 100 m apart, more than the radius: only the route's own is kept.
     const { assert!(RELEVANT_RADIUS_M < 100.0) };
     let (map, lane) = routed.unwrap();
-    assert_eq!((map.ids(), lane), (&["a3_0>b3_0".to_string()][..], Some(0)));
-    assert!(unknown.0.contains("no movement \"a3>b4\""), "{unknown}");
+    assert_eq!(
+        (map.ids(), lane.map(|r| r.lanes().to_vec())),
+        (&["a3_0>b3_0".to_string()][..], Some(vec![0]))
+    );
+    assert!(unknown.0.contains("no route \"a3>b4\""), "{unknown}");
 }
 
 #[test]

@@ -37,7 +37,7 @@ fn main() {
                 core.morphology().conflicts().len(),
                 started.elapsed().as_secs_f64() * 1e3
             );
-            let lane = lane.expect("a route");
+            let lane = lane.expect("a route").first();
             let traffic = Traffic::on_map(&core, lane, agents);
             (core, traffic)
         }
