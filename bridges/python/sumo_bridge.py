@@ -39,9 +39,9 @@ counts a gap below the follower's ``minGap``, 2.5 m, as one), success (the ego's
 last junction of its route within ``--duration``), time to clear (until then), PET between the
 ego and every other vehicle (``pet.PetGrid`` at every step, and when the smallest happened),
 the largest deceleration of any SUMO vehicle within 30 m of the ego, the time the ego stood
-(below 0.1 m/s) before clearing, and its mean speed until then. The summary prints means, the
-smallest PET and the largest deceleration per policy and speed; ``--json`` writes every
-episode.
+(below 0.1 m/s) before clearing, its mean speed and its jerk (RMS and largest, from the change
+of its acceleration between steps) until then. The summary prints means, the smallest PET
+and the largest deceleration and jerk per policy and speed; ``--json`` writes every episode.
 """
 
 import argparse
@@ -255,9 +255,9 @@ def run_episode(ls, args, policy, driver, scenario, speed, seed):
     e = {"policy": policy, "scenario": scenario, "speed_mps": speed, "seed": seed,
          "collision": False, "success": False, "time_to_clear_s": None, "min_pet_s": None,
          "max_decel_near_mps2": 0.0, "standing_s": 0.0, "avg_speed_mps": None,
-         "decisions_missed": 0}
+         "decisions_missed": 0, "jerk_rms_mps3": None, "max_jerk_mps3": None}
     ls.simulationStep()  # inserts the vehicles
-    speeds, t = [], ls.simulation.getTime()
+    speeds, accels, t = [], [], ls.simulation.getTime()
     cleared_at = None
     while t < args.duration:
         if "ego" not in ls.vehicle.getIDList():
@@ -278,6 +278,7 @@ def run_episode(ls, args, policy, driver, scenario, speed, seed):
                     + [("ego", True, (ego[0], ego[1]), ego[2], ego[5], ego[6])])
         if cleared_at is None:
             speeds.append(ego[3])
+            accels.append(ego[4])
             if ego[3] < STANDING_MPS:
                 e["standing_s"] += args.step
             road = ls.vehicle.getRoadID("ego")
@@ -297,6 +298,10 @@ def run_episode(ls, args, policy, driver, scenario, speed, seed):
     e["min_pet_s"] = None if math.isinf(pet.min_pet) else round(pet.min_pet, 3)
     e["min_pet_at_s"] = None if pet.min_pet_t is None else round(pet.min_pet_t, 3)
     e["avg_speed_mps"] = round(sum(speeds) / len(speeds), 3) if speeds else None
+    jerks = [(b - a) / args.step for a, b in zip(accels, accels[1:])]
+    if jerks:
+        e["jerk_rms_mps3"] = round(math.sqrt(sum(j * j for j in jerks) / len(jerks)), 3)
+        e["max_jerk_mps3"] = round(max(abs(j) for j in jerks), 3)
     e["max_decel_near_mps2"] = round(e["max_decel_near_mps2"], 3)
     e["standing_s"] = round(e["standing_s"], 3)
     return e
@@ -304,7 +309,8 @@ def run_episode(ls, args, policy, driver, scenario, speed, seed):
 
 def summarize(episodes):
     """Per (policy, speed): episodes, collisions, success, mean time to clear, smallest and
-    median PET, largest and mean deceleration near the ego, mean standing, mean speed."""
+    median PET, largest and mean deceleration near the ego, mean standing, mean speed, mean RMS
+    jerk and the largest jerk."""
     rows = []
     for key in sorted({(e["policy"], e["speed_mps"]) for e in episodes}):
         es = [e for e in episodes if (e["policy"], e["speed_mps"]) == key]
@@ -324,6 +330,8 @@ def summarize(episodes):
             "decel_above_3": sum(d > 3.0 for d in decel),
             "standing_s": round(sum(e["standing_s"] for e in es) / len(es), 2),
             "avg_speed_mps": round(sum(e["avg_speed_mps"] or 0.0 for e in es) / len(es), 2),
+            "jerk_rms_mps3": round(sum(e["jerk_rms_mps3"] or 0.0 for e in es) / len(es), 2),
+            "max_jerk_mps3": max((e["max_jerk_mps3"] or 0.0 for e in es), default=None),
             "decisions_missed": sum(e["decisions_missed"] for e in es),
         })
     return rows
@@ -336,7 +344,8 @@ def summary_line(r):
             f"({r['pet_below_1_5']} below 1.5 s), others' braking near the ego max "
             f"{r['max_decel_near_mps2']} mean {r['mean_decel_near_mps2']} m/s² "
             f"({r['decel_above_3']} above 3), standing {r['standing_s']} s, speed "
-            f"{r['avg_speed_mps']} m/s, decisions missed {r['decisions_missed']}")
+            f"{r['avg_speed_mps']} m/s, jerk RMS {r['jerk_rms_mps3']} max {r['max_jerk_mps3']} "
+            f"m/s³, decisions missed {r['decisions_missed']}")
 
 
 def main(argv=None):

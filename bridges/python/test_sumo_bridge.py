@@ -71,6 +71,8 @@ class SumoBridge(unittest.TestCase):
         self.assertGreater(driver.sequence, 100)
         self.assertIsNotNone(e["min_pet_s"])
         self.assertLess(e["time_to_clear_s"], a.duration)
+        self.assertGreater(e["max_jerk_mps3"], 0.0)
+        self.assertLessEqual(e["jerk_rms_mps3"], e["max_jerk_mps3"])
 
     def test_a_route_across_two_junctions_hands_over_from_leg_to_leg(self):
         """The corridor (two junctions): Concord drives the route SJ1>J1J2>J2N through both,
@@ -179,12 +181,14 @@ class Summary(unittest.TestCase):
         def ep(policy, speed, **kw):
             e = {"policy": policy, "speed_mps": speed, "collision": False, "success": True,
                  "time_to_clear_s": 10.0, "min_pet_s": 2.0, "max_decel_near_mps2": 1.0,
-                 "standing_s": 0.0, "avg_speed_mps": 6.0, "decisions_missed": 0}
+                 "standing_s": 0.0, "avg_speed_mps": 6.0, "decisions_missed": 0,
+                 "jerk_rms_mps3": 1.0, "max_jerk_mps3": 2.0}
             e.update(kw)
             return e
 
         rows = sb.summarize([
-            ep("concord", 8.0, min_pet_s=1.2, max_decel_near_mps2=3.5),
+            ep("concord", 8.0, min_pet_s=1.2, max_decel_near_mps2=3.5, jerk_rms_mps3=3.0,
+               max_jerk_mps3=9.0),
             ep("concord", 8.0, collision=True, success=False, time_to_clear_s=None,
                min_pet_s=None),
             ep("sumo", 8.0, time_to_clear_s=12.0),
@@ -194,6 +198,7 @@ class Summary(unittest.TestCase):
                          ("concord", 2, 1, 1))
         self.assertEqual((c["min_pet_s"], c["pet_below_1_5"], c["decel_above_3"]), (1.2, 1, 1))
         self.assertEqual(c["time_to_clear_s"], 10.0)
+        self.assertEqual((c["jerk_rms_mps3"], c["max_jerk_mps3"]), (2.0, 9.0))
         self.assertEqual((s["policy"], s["time_to_clear_s"], s["min_pet_s"]), ("sumo", 12.0, 2.0))
 
     def test_a_missing_network_is_a_clear_error(self):
