@@ -79,15 +79,15 @@ CORRIDOR_EGO_ROUTE = ("SJ1", "J1J2", "J2N")
 CORRIDOR_EAST_ROUTE = ("WJ1", "J1J2", "J2E")
 CORRIDOR_WEST_ROUTE = ("EJ2", "J2J1", "J1W")
 CORRIDOR_GAP_M = 80.0
-# Each scenario's network, the ego's route and the routes of the other cars.
+# Each scenario's network, the ego's route and the named routes of the other cars.
+PAPER_ROUTES = {"priority": PRIORITY_ROUTE, "minor": MINOR_ROUTE}
 SCENARIOS = {
-    "left_turn": (DEFAULT_NET, EGO_ROUTE),
-    "stream": (DEFAULT_NET, EGO_ROUTE),
-    "minor": (DEFAULT_NET, EGO_ROUTE),
-    "corridor": (CORRIDOR_NET, CORRIDOR_EGO_ROUTE),
+    "left_turn": (DEFAULT_NET, EGO_ROUTE, PAPER_ROUTES),
+    "stream": (DEFAULT_NET, EGO_ROUTE, PAPER_ROUTES),
+    "minor": (DEFAULT_NET, EGO_ROUTE, PAPER_ROUTES),
+    "corridor": (CORRIDOR_NET, CORRIDOR_EGO_ROUTE,
+                 {"east": CORRIDOR_EAST_ROUTE, "west": CORRIDOR_WEST_ROUTE}),
 }
-ROUTES = {"priority": PRIORITY_ROUTE, "minor": MINOR_ROUTE, "east": CORRIDOR_EAST_ROUTE,
-          "west": CORRIDOR_WEST_ROUTE}
 # A SUMO vehicle within this distance of the ego is "near" it for the braking metric, m.
 NEAR_M = 30.0
 # Speed mode for the ego under Concord: no safe-speed, acceleration or right-of-way checks.
@@ -137,10 +137,8 @@ def to_wire(s, agent_id):
 
 def add_traffic(ls, scenario, speed, rng):
     """The scenario's SUMO vehicles; returns their ids."""
-    net = SCENARIOS[scenario][0]
-    for name, edges in ROUTES.items():
-        if (net == CORRIDOR_NET) == (name in ("east", "west")):
-            ls.route.add(name, list(edges))
+    for name, edges in SCENARIOS[scenario][2].items():
+        ls.route.add(name, list(edges))
     first = START_FROM_CENTRE_M + rng.uniform(-5.0, 5.0)
     if scenario == "corridor":
         # Eastbound at J1 as the ego gets there; westbound at J2 as the ego gets there, which

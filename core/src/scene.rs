@@ -950,11 +950,7 @@ impl Morphology {
         m.lanes[..lanes.len()].copy_from_slice(lanes);
         for a in 0..lanes.len() {
             for b in a + 1..lanes.len() {
-                let same_start = lanes[a].points[0].minus(lanes[b].points[0]).norm();
-                if same_start < BRANCH_TOLERANCE_M
-                    || branches_off(&lanes[a], &lanes[b])
-                    || branches_off(&lanes[b], &lanes[a])
-                {
+                if branches_off(&lanes[a], &lanes[b]) || branches_off(&lanes[b], &lanes[a]) {
                     continue;
                 }
                 if let Some((s_a, s_b, pos)) = first_contact(&lanes[a], &lanes[b]) {

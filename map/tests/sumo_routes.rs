@@ -73,16 +73,21 @@ fn a_route_through_two_junctions_has_a_leg_for_each() {
 
     // A car on the major road approaching J1 is on its own movement through J1, not on the
     // extensions of the lanes that start beyond J1 (the second leg, J2's movements).
-    let east = Vec2::new(1.0, 0.0);
-    let (lane, _) = morph
-        .match_lane(Vec2::new(-10.0, -5.0), east, 0.5, TurnSignal::Off)
-        .unwrap();
-    assert_eq!(map.ids()[lane as usize], "WJ1_0>J1J2_0");
+    let eastbound_at = |x: f64| {
+        let (lane, f) = morph
+            .match_lane(
+                Vec2::new(x, -5.0),
+                Vec2::new(1.0, 0.0),
+                0.5,
+                TurnSignal::Off,
+            )
+            .unwrap();
+        (map.ids()[lane as usize].as_str(), f.s)
+    };
+    assert_eq!(eastbound_at(-10.0).0, "WJ1_0>J1J2_0");
     // Queued further back than the map reaches, it is still matched, by extension.
-    let (lane, f) = morph
-        .match_lane(Vec2::new(-120.0, -5.0), east, 0.5, TurnSignal::Off)
-        .unwrap();
-    assert!(map.ids()[lane as usize].starts_with("WJ1_0>") && f.s < 0.0);
+    let (id, s) = eastbound_at(-120.0);
+    assert!(id.starts_with("WJ1_0>") && s < 0.0, "{id} {s}");
 
     // The first leg hands over once it has cleared J1's merge zone, on the link to J2.
     let handover = route.handover_s(0);
