@@ -6,31 +6,22 @@
 //!   the core weighs, now (simulated time waits) or after the call's measured latency.
 //! * `concord experiment prompts`: OPM vs Raw vs Simple (paper §6.1.3, Fig. 5).
 //!
-//! Labelled scenes come from the simulator: random left turns (driver style, initial speed,
-//! HDV start) driven by Concord logit-only and stopped at a random moment before the conflict
-//! is resolved. Each scene's label is the oracle's maneuver: the fastest route-consistent
-//! maneuver that, rolled out for 8 s against a copy of the human driver, never brings the cars
-//! within 3 m (`concord_sim::controllers::oracle`). Each scene becomes the advice request the
-//! core would issue, rendered in the three formats with the sidecar's own prompts (asking for
-//! up to 3 reasoning steps) and sent once per format; accuracy is the share of answers equal
-//! to the label, latency is the whole call, reasoning steps are the answer's `steps` count.
+//! Labelled scenes are [`crate::learn::labelled_scenes`]' left turns (the oracle's label). Each
+//! scene becomes the advice request the core would issue, rendered in the three formats with
+//! the sidecar's own prompts (asking for up to 3 reasoning steps) and sent once per format;
+//! accuracy is the share of answers equal to the label, latency is the whole call, reasoning
+//! steps are the answer's `steps` count.
 
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use concord_core::Params;
 use concord_ipc::wire::{AdviceRequest, SceneFrame};
 use concord_sidecar::config::{LlmConfig, PromptFormat, SidecarConfig};
 use concord_sidecar::llm::LlmClient;
 use concord_sidecar::schema::{advice_schema, AdviceAnswer};
-use concord_sim::controllers::{
-    best_maneuver, AdviceSource, Advisor, ConcordController, Controller,
-};
-use concord_sim::driver::{DriverStyle, HumanDriver};
-use concord_sim::world::{ScenarioKind, World, DT};
-use rand::rngs::SmallRng;
-use rand::{Rng, SeedableRng};
+use concord_sim::controllers::AdviceSource;
+use concord_sim::world::World;
 
 /// Concord's LLM advisor in the simulation; also the client of the prompt comparison.
 pub struct LlmAdvisor {
@@ -42,9 +33,10 @@ pub struct LlmAdvisor {
 }
 
 impl LlmAdvisor {
-    /// An advisor on the server at `url`; fails when it does not answer.
+    /// An advisor on the server at `url`; fails when it does not answer. A server with a LoRA
+    /// adapter loaded (the shipped advisor) is asked with the prompts it was trained on.
     pub fn new(url: &str) -> Result<Self, String> {
-        let cfg = SidecarConfig::default();
+        let mut cfg = SidecarConfig::default();
         let llm = LlmConfig {
             base_url: url.to_string(),
             request_timeout_s: 60.0,
@@ -59,6 +51,7 @@ impl LlmAdvisor {
                 "no LLM server answers at {url} ({e}); start one with `deploy/llm/llm.sh start`"
             )
         })?;
+        cfg.llm.fine_tuned = rt.block_on(crate::advisor_eval::has_adapter(url));
         Ok(LlmAdvisor {
             client: LlmClient::new(&llm)?,
             rt,
@@ -87,6 +80,7 @@ impl LlmAdvisor {
             history,
             &concord_sidecar::prompt::Stated::default(),
             self.cfg.intent.weak_below,
+            self.cfg.llm.fine_tuned,
         );
         let body = self
             .client
@@ -140,75 +134,17 @@ impl AdviceSource for LlmAdvisor {
 /// Reasoning steps asked for.
 const STEPS: usize = 3;
 
-/// One labelled scene.
-struct Labelled {
-    request: AdviceRequest,
-    history: Vec<SceneFrame>,
-    label: concord_core::Maneuver,
-}
-
-fn scenes(n: usize, seed: u64) -> Vec<Labelled> {
-    let mut rng = SmallRng::seed_from_u64(seed);
-    let params = Params::default();
-    let mut out = Vec::new();
-    while out.len() < n {
-        let style = DriverStyle::DECISIVE[rng.random_range(0..DriverStyle::DECISIVE.len())];
-        let speed = rng.random_range(5.0..11.0);
-        let mut w = World::new(ScenarioKind::LeftTurn, speed, rng.random_range(-15.0..15.0));
-        let mut hdv = [HumanDriver::new(style, speed, rng.random())];
-        let mut cav = ConcordController::new(params, &w, Advisor::None);
-        let stop_at = rng.random_range(0.5..4.0);
-        let mut history: Vec<SceneFrame> = Vec::new();
-        let mut seq = 0;
-        while w.t < stop_at {
-            let cmd = cav.act(&w, &hdv);
-            history.push(SceneFrame::from_scene(
-                seq,
-                (w.t * 1e9) as u64 + 1,
-                &w.scene(),
-            ));
-            seq += 1;
-            let a_h = hdv[0].act(&w, 0, cmd.ehmi).accel;
-            w.step(cmd.accel, &[a_h]);
-        }
-        let (ego_d, hdv_d) = w.to_conflict(0);
-        let zone = w.hdvs[0].zone_half_m;
-        let Some(decision) = cav.last else { continue };
-        if ego_d < zone || hdv_d < -zone {
-            continue;
-        }
-        let core = cav.core();
-        let request = AdviceRequest::from_core(
-            decision.request_id,
-            seq,
-            0,
-            u64::MAX,
-            &decision,
-            core,
-            w.ego.lane,
-        );
-        // No message reaches the driver in the label's rollouts: the prompt has none either.
-        let label = best_maneuver(&w, &hdv, false);
-        // No label may fill more than half the set.
-        if out.iter().filter(|l: &&Labelled| l.label == label).count() >= n.div_ceil(2) {
-            continue;
-        }
-        let keep = (0.45 / DT) as usize;
-        let history = history.split_off(history.len().saturating_sub(keep));
-        out.push(Labelled {
-            request,
-            history,
-            label,
-        });
-    }
-    out
-}
-
 /// Runs the comparison against `url` and writes `prompts.csv` under `out`.
 pub fn run(url: &str, n: usize, seed: u64, out: &Path) -> Result<(), String> {
     let advisor = LlmAdvisor::new(url)?;
     let model = &advisor.model;
-    let set = scenes(n, seed);
+    let set = crate::learn::labelled_scenes(
+        n,
+        n.div_ceil(2),
+        seed,
+        &[concord_sim::world::ScenarioKind::LeftTurn],
+        "labelled scenes",
+    )?;
     let mut labels = [0usize; 5];
     for s in &set {
         labels[s.label as usize] += 1;

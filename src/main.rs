@@ -1,5 +1,7 @@
 //! `concord`: the command line of the Concord decision service.
 
+mod advisor_eval;
+mod learn;
 mod llm_experiments;
 
 use std::fmt::Write as _;
@@ -104,6 +106,22 @@ enum ExperimentArg {
         /// (e.g. `--seed 500`).
         #[arg(long, default_value_t = 1)]
         seed: u64,
+    },
+    /// The advisor on held-out scenes and messages: the base model against the fine-tuned one
+    /// (the server's LoRA adapter at scale 0 and 1): accuracy, confusion, calibration (ECE,
+    /// reliability diagrams), the gate's pass shares, intent parsing.
+    Advisor {
+        /// Base URL of the LLM server (llama.cpp's, for the adapter's scale).
+        #[arg(long, default_value = "http://127.0.0.1:8181/v1")]
+        url: String,
+        /// Held-out advice scenes.
+        #[arg(long, default_value_t = 150)]
+        scenes: usize,
+        /// Held-out intent messages.
+        #[arg(long, default_value_t = 150)]
+        messages: usize,
+        #[arg(long, default_value = "results/advisor")]
+        out: PathBuf,
     },
     /// Fits the saliency key (eq. 7) on simulated interactions; `--write` stores it as the
     /// core's shipped key.
@@ -291,6 +309,48 @@ enum Command {
         #[command(subcommand)]
         which: ExperimentArg,
     },
+    /// The advisor's fine-tuning data (§5 step 5; deploy/llm/README.md has the recipe).
+    Learn {
+        #[command(subcommand)]
+        which: LearnArg,
+    },
+}
+
+/// The steps of `concord learn`.
+#[derive(Subcommand)]
+enum LearnArg {
+    /// Writes the advice and intent sets (training and held out) and the interaction log's
+    /// examples as JSONL, each prompt rendered as the sidecar renders it.
+    Dataset {
+        /// Output directory.
+        #[arg(long, default_value = "results/learn")]
+        out: PathBuf,
+        /// Sidecar configuration whose prompts to render [default: the built-in one, the prompts
+        /// the shipped adapter is trained on].
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Advice scenes for training (seeds from 0).
+        #[arg(long, default_value_t = 360)]
+        advice_train: usize,
+        /// Held-out advice scenes (seeds from 500 000).
+        #[arg(long, default_value_t = 150)]
+        advice_heldout: usize,
+        /// Intent messages for training.
+        #[arg(long, default_value_t = 400)]
+        intents_train: usize,
+        /// Held-out intent messages (from the held-out phrase file).
+        #[arg(long, default_value_t = 150)]
+        intents_heldout: usize,
+        /// Phrase file of the training messages.
+        #[arg(long, default_value = "deploy/llm/intents/train.txt")]
+        phrases: PathBuf,
+        /// Phrase file of the held-out messages (other templates and words).
+        #[arg(long, default_value = "deploy/llm/intents/heldout.txt")]
+        heldout_phrases: PathBuf,
+        /// Interaction logs of the sidecar to add (`log.jsonl`), repeatable.
+        #[arg(long)]
+        log: Vec<PathBuf>,
+    },
 }
 
 /// Longest duration or period accepted on the command line, s (30 days).
@@ -437,6 +497,33 @@ fn main() -> ExitCode {
             let iox_config = iox::init(iox_path.as_deref()).map_err(|e| e.to_string())?;
             concord_sidecar::run(cfg, &iox_config)
         })(),
+        Command::Learn {
+            which:
+                LearnArg::Dataset {
+                    out,
+                    config,
+                    advice_train,
+                    advice_heldout,
+                    intents_train,
+                    intents_heldout,
+                    phrases,
+                    heldout_phrases,
+                    log,
+                },
+        } => (|| {
+            let cfg = match config {
+                Some(path) => concord_sidecar::SidecarConfig::load(&path)?,
+                None => concord_sidecar::SidecarConfig::default(),
+            };
+            learn::dataset(
+                &cfg,
+                &out,
+                (advice_train, advice_heldout),
+                (intents_train, intents_heldout),
+                (&phrases, &heldout_phrases),
+                &log,
+            )
+        })(),
         Command::Experiment { which } => match which {
             ExperimentArg::Paper {
                 reps,
@@ -477,6 +564,12 @@ fn main() -> ExitCode {
                 out,
                 seed,
             } => llm_experiments::run(&url, scenes, seed, &out),
+            ExperimentArg::Advisor {
+                url,
+                scenes,
+                messages,
+                out,
+            } => advisor_eval::run(&url, scenes, messages, &out),
             ExperimentArg::Saliency {
                 scenes,
                 seed,

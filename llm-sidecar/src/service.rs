@@ -5,7 +5,9 @@
 //!   that describes a different situation (another logit favourite, another set of risky
 //!   conflicts, another passenger intent) cancels it, unless the one in flight itself replaced
 //!   a cancelled request (so a slow server still answers every other request); a newer one of
-//!   the same situation waits.
+//!   the same situation waits. A request is not sent at all when the corrected P_n is settled
+//!   (its favourite leads by `advice.settled_margin`) and the situation is the one last asked
+//!   about: the answer could not matter (counted as settled).
 //!   Every answer, or failure with its reason, is published with the request id and the
 //!   intents known so far, which is how intents reach the core.
 //! * **Intents.** Each message is parsed once (see [`crate::ledger`]) by the quarantined intent
@@ -60,6 +62,8 @@ const OPEN_INTENT_BELOW: f32 = 0.6;
 pub struct Counters {
     pub requests_taken: u64,
     pub requests_too_late: u64,
+    /// Requests not sent: P_n settled and the situation unchanged since the last one asked.
+    pub requests_settled: u64,
     pub cancelled: u64,
     pub answered: u64,
     pub failures: [u64; 5],
@@ -98,6 +102,8 @@ struct State {
     ledger: Ledger,
     /// The newest request seen by any worker.
     request: Option<AdviceRequest>,
+    /// The situation of the last request sent to the model.
+    last_asked: Option<Situation>,
     decision: Option<WireDecision>,
     /// Request id of the newest published advice, for matching the core's verdict.
     published: Option<u64>,
@@ -133,7 +139,17 @@ enum Deadline {
 type Phrasing<'a> = Pin<Box<dyn Future<Output = Result<String, String>> + 'a>>;
 
 /// What makes two requests the same situation for the model.
-fn situation(r: &AdviceRequest) -> (usize, Vec<u32>, u8, u8) {
+/// The corrected P_n's favourite leads the runner-up by at least `margin`.
+fn settled(p_corrected: &[f64; 5], margin: f64) -> bool {
+    let mut p = *p_corrected;
+    p.sort_by(|a, b| b.total_cmp(a));
+    p[0] - p[1] >= margin
+}
+
+/// What makes a request new: P_n's favourite, the risky road users, the passenger's intent.
+type Situation = (usize, Vec<u32>, u8, u8);
+
+fn situation(r: &AdviceRequest) -> Situation {
     let favourite = r
         .p_corrected
         .iter()
@@ -179,6 +195,7 @@ impl Sidecar {
                 heard: Heard::new(cfg.intent.dialogue_turns, cfg.intent.max_parties + 1),
                 ledger,
                 request: None,
+                last_asked: None,
                 decision: None,
                 published: None,
                 log,
@@ -260,8 +277,18 @@ impl Sidecar {
                 self.state().counters.requests_too_late += 1;
                 continue;
             }
-            self.state().counters.requests_taken += 1;
             let here = situation(&req);
+            {
+                let mut s = self.state();
+                if settled(&req.p_corrected, self.cfg.advice.settled_margin)
+                    && s.last_asked.as_ref() == Some(&here)
+                {
+                    s.counters.requests_settled += 1;
+                    continue;
+                }
+                s.last_asked = Some(here.clone());
+                s.counters.requests_taken += 1;
+            }
             let work = self.advise(req, Instant::now() + left);
             tokio::pin!(work);
             loop {
@@ -321,6 +348,7 @@ impl Sidecar {
                 &history,
                 &stated,
                 self.cfg.intent.weak_below,
+                self.cfg.llm.fine_tuned,
             )
         };
         let body = self.client.body(
@@ -463,6 +491,7 @@ impl Sidecar {
                 last.as_deref(),
                 text,
                 self.cfg.intent.max_text_chars,
+                self.cfg.llm.fine_tuned,
             )
         };
         let body = self.client.body(
@@ -866,8 +895,8 @@ impl Sidecar {
         let c = self.counters();
         let ([p50, p95, max], tokens) = self.latency();
         let mut out = format!(
-            "requests {} taken, {} too late, {} cancelled | answered {} (latency ms p50 {p50} p95 {p95} max {max}, prompt {tokens:.0} tokens) | failures",
-            c.requests_taken, c.requests_too_late, c.cancelled, c.answered
+            "requests {} taken, {} settled, {} too late, {} cancelled | answered {} (latency ms p50 {p50} p95 {p95} max {max}, prompt {tokens:.0} tokens) | failures",
+            c.requests_taken, c.requests_settled, c.requests_too_late, c.cancelled, c.answered
         );
         for f in AdviceFailure::ALL {
             let _ = write!(out, " {}={}", f.name(), c.failures[f as usize]);
@@ -914,5 +943,20 @@ impl Sidecar {
 fn merge(base: &mut serde_json::Value, extra: serde_json::Value) {
     if let (Some(b), serde_json::Value::Object(e)) = (base.as_object_mut(), extra) {
         b.extend(e);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_request_is_settled_only_when_its_favourite_leads_by_the_margin() {
+        let p = [0.1, 0.84, 0.03, 0.03, 0.0];
+        assert!(settled(&p, 0.6));
+        assert!(!settled(&p, 0.8));
+        assert!(!settled(&[0.41, 0.05, 0.03, 0.51, 0.0], 0.6));
+        // Above 1 nothing is settled: every request is asked.
+        assert!(!settled(&[1.0, 0.0, 0.0, 0.0, 0.0], 1.01));
     }
 }

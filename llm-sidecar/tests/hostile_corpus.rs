@@ -248,6 +248,7 @@ fn prompt_vocabulary(request: &AdviceRequest) -> BTreeSet<String> {
                 &[],
                 &stated,
                 0.7,
+                false,
             ));
         }
         add(prompt::reply_messages(
@@ -275,7 +276,7 @@ fn prompt_vocabulary(request: &AdviceRequest) -> BTreeSet<String> {
         }
     }
     for speaker in ["road user 1", "the passenger"] {
-        add(prompt::intent_messages(speaker, None, "", 200));
+        add(prompt::intent_messages(speaker, None, "", 200, false));
     }
     v
 }

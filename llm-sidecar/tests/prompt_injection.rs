@@ -95,7 +95,8 @@ fn ask_advice(
     request: &AdviceRequest,
     stated: &Stated,
 ) -> Option<AdviceAnswer> {
-    let messages = prompt::advice_messages(PromptFormat::Opm, 0, 3, request, &[], stated, 0.7);
+    let messages =
+        prompt::advice_messages(PromptFormat::Opm, 0, 3, request, &[], stated, 0.7, false);
     let body = c.body(&messages, "advice", &schema::advice_schema(0), 64);
     rt.block_on(c.call(&body, Instant::now() + Duration::from_secs(20)))
         .ok()
@@ -106,7 +107,7 @@ fn ask_advice(
 fn the_intent_prompt_keeps_its_prefix_its_quote_and_its_schema() {
     let c = LlmClient::new(&LlmConfig::default()).unwrap();
     for text in corpus() {
-        let m = prompt::intent_messages("road user 1", None, &text, MAX_CHARS);
+        let m = prompt::intent_messages("road user 1", None, &text, MAX_CHARS, false);
         assert_eq!(m.len(), 2, "{text}");
         assert_eq!(m[0].content, prompt::INTENT_PREFIX);
         let user = &m[1].content;
@@ -182,7 +183,7 @@ fn the_real_model_on_the_corpus_stays_in_its_schema_and_behind_the_veto() {
     for text in corpus() {
         // What the passenger's words can do now: set the passenger's intent, which the advice
         // prompt renders.
-        let messages = prompt::intent_messages("the passenger", None, &text, MAX_CHARS);
+        let messages = prompt::intent_messages("the passenger", None, &text, MAX_CHARS, false);
         let body = c.body(
             &messages,
             "intent",

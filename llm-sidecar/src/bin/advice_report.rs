@@ -183,6 +183,7 @@ impl Report {
             history(&snap.frames, history_s),
             &prompt::Stated::default(),
             self.cfg.intent.weak_below,
+            self.cfg.llm.fine_tuned,
         )
     }
 
@@ -359,7 +360,7 @@ impl Report {
         let max = self.cfg.intent.max_text_chars;
         for (from, text) in messages {
             let speaker = from.map_or("the passenger".to_string(), |id| format!("road user {id}"));
-            let m = prompt::intent_messages(&speaker, None, text, max);
+            let m = prompt::intent_messages(&speaker, None, text, max, self.cfg.llm.fine_tuned);
             let body = self.client.body(
                 &m,
                 "intent",
