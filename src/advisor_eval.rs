@@ -17,22 +17,16 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
+use crate::learn;
+use crate::llm_experiments::LlmAdvisor;
 use concord_core::Maneuver;
-use concord_sidecar::config::{LlmConfig, SidecarConfig};
-use concord_sidecar::llm::LlmClient;
 use concord_sidecar::schema::{
     action_name, advice_schema, intent_schema, style_name, task_name, AdviceAnswer, IntentAnswer,
     INTENT_MAX_TOKENS,
 };
-use concord_sim::world::ScenarioKind;
-
-use crate::learn;
 
 /// The intent dimensions, in the schema's order.
 const DIMENSIONS: [&str; 3] = ["style", "action", "task"];
-
-/// The core's confidence gate (`AdviceGate::min_confidence`'s default).
-const GATE: f64 = 0.7;
 
 /// One model's answers.
 #[derive(Default)]
@@ -70,15 +64,16 @@ impl AdviceRun {
         (ece, bins)
     }
 
-    /// Correct answers passing the gate, over correct answers; wrong ones passing it, over all.
-    fn gate(&self) -> (f64, f64) {
+    /// Correct answers passing a confidence gate at `gate`, over correct answers; wrong ones
+    /// passing it, over all.
+    fn gate(&self, gate: f64) -> (f64, f64) {
         let correct = self.answers.iter().filter(|(l, a, _)| l == a);
         let n_correct = correct.clone().count();
-        let pass = correct.filter(|(_, _, c)| *c >= GATE).count();
+        let pass = correct.filter(|(_, _, c)| *c >= gate).count();
         let wrong_pass = self
             .answers
             .iter()
-            .filter(|(l, a, c)| l != a && *c >= GATE)
+            .filter(|(l, a, c)| l != a && *c >= gate)
             .count();
         (
             pass as f64 / n_correct.max(1) as f64,
@@ -146,36 +141,17 @@ fn models(has_adapter: bool) -> Vec<(&'static str, bool, Option<f64>)> {
     m
 }
 
-/// Whether the llama.cpp server at `url` (ending in `/v1`) has a LoRA adapter loaded.
-pub async fn has_adapter(url: &str) -> bool {
-    let root = url.trim_end_matches('/').trim_end_matches("/v1");
-    let Ok(r) = reqwest::get(format!("{root}/lora-adapters")).await else {
-        return false;
-    };
-    let v: serde_json::Value = r.json().await.unwrap_or_default();
-    v.as_array().is_some_and(|a| !a.is_empty())
-}
-
 /// Runs the evaluation against `url`, writes `advisor.csv`, `intents.csv` and the reliability
 /// diagrams under `out`, and prints the tables.
 pub fn run(url: &str, scenes: usize, messages: usize, out: &Path) -> Result<(), String> {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .map_err(|e| e.to_string())?;
-    let base_cfg = SidecarConfig::default();
-    let llm = LlmConfig {
-        base_url: url.to_string(),
-        request_timeout_s: 60.0,
-        ..base_cfg.llm.clone()
-    };
-    let model = rt.block_on(concord_sidecar::probe(&llm)).map_err(|e| {
-        format!("no LLM server answers at {url} ({e}); start one with `deploy/llm/llm.sh start`")
-    })?;
-    let client = LlmClient::new(&llm)?;
-    let adapter = rt.block_on(has_adapter(url));
+    let advisor = LlmAdvisor::new(url)?;
+    // The core's gate on A_final (eq. 16).
+    let gate = concord_core::Params::default().advice.confidence_min;
+    let (rt, client, base_cfg) = (&advisor.rt, &advisor.client, &advisor.cfg);
+    let adapter = base_cfg.llm.fine_tuned;
     eprintln!(
-        "concord experiment advisor: model {model:?} at {url}, {}",
+        "concord experiment advisor: model {:?} at {url}, {}",
+        advisor.model,
         if adapter {
             "adapter loaded: base (scale 0) against fine-tuned (scale 1)"
         } else {
@@ -186,15 +162,10 @@ pub fn run(url: &str, scenes: usize, messages: usize, out: &Path) -> Result<(), 
         scenes,
         scenes.div_ceil(3),
         learn::HELD_OUT_SEED,
-        &[
-            ScenarioKind::LeftTurn,
-            ScenarioKind::LeftTurnPriority,
-            ScenarioKind::Merge,
-            ScenarioKind::Stream,
-        ],
+        &learn::SCENARIOS,
         "held-out scenes",
     )?;
-    let phrases_path = Path::new("deploy/llm/intents/heldout.txt");
+    let phrases_path = Path::new(learn::HELD_OUT_PHRASES);
     let text = std::fs::read_to_string(phrases_path)
         .map_err(|e| format!("{}: {e}", phrases_path.display()))?;
     let phrases = learn::Phrases::parse(&text, &phrases_path.display().to_string())?;
@@ -233,7 +204,9 @@ pub fn run(url: &str, scenes: usize, messages: usize, out: &Path) -> Result<(), 
                 .and_then(|r| AdviceAnswer::decode(&r.answer).map_err(|e| e.to_string()))
             {
                 Ok(a) => {
-                    let c = a.confidence.unwrap_or(0.0);
+                    let c = a
+                        .confidence
+                        .unwrap_or(base_cfg.llm.confidence_without_logprobs);
                     run.answers.push((s.label, a.maneuver, c));
                     run.latencies_ms.push(ms);
                     let _ = writeln!(
@@ -275,7 +248,7 @@ pub fn run(url: &str, scenes: usize, messages: usize, out: &Path) -> Result<(), 
             let mut body = client.body(&messages, "intent", &intent_schema(), INTENT_MAX_TOKENS);
             let (reply, _) = ask(&mut body, scale);
             let parsed = reply.map_err(|e| e.to_string()).and_then(|r| {
-                IntentAnswer::decode(&r.answer, llm.confidence_without_logprobs)
+                IntentAnswer::decode(&r.answer, base_cfg.llm.confidence_without_logprobs)
                     .map_err(|e| e.to_string())
             });
             let got: [Option<(&str, f64)>; 3] = match &parsed {
@@ -316,7 +289,7 @@ pub fn run(url: &str, scenes: usize, messages: usize, out: &Path) -> Result<(), 
     let mut summary = serde_json::Map::new();
     for ((name, run), (_, counts, unstated)) in advice_rows.iter().zip(&intent_rows) {
         let (ece, _) = run.calibration();
-        let (pass, wrong) = run.gate();
+        let (pass, wrong) = run.gate(gate);
         let dims: Vec<_> = (0..3)
             .map(|d| {
                 serde_json::json!({
@@ -346,7 +319,7 @@ pub fn run(url: &str, scenes: usize, messages: usize, out: &Path) -> Result<(), 
     println!("|---|---|---|---|---|---|---|");
     for (name, run) in &advice_rows {
         let (ece, _) = run.calibration();
-        let (pass, wrong) = run.gate();
+        let (pass, wrong) = run.gate(gate);
         println!(
             "| {name} | {:.1} % | {}/{n} | {ece:.3} | {:.1} % | {:.1} % | {:.0} / {:.0} |",
             100.0 * run.accuracy(n),
@@ -433,7 +406,7 @@ mod tests {
         // Bin 9: conf 0.935, acc 0.5; bin 3: conf 0.33, acc 1.
         assert_eq!(bins[9].0, 2);
         assert!((ece - (0.5 * 0.435 + 0.5 * 0.67)).abs() < 1e-9, "{ece}");
-        let (pass, wrong) = run.gate();
+        let (pass, wrong) = run.gate(0.7);
         assert!((pass - 1.0 / 3.0).abs() < 1e-9);
         assert!((wrong - 0.25).abs() < 1e-9);
         assert!((run.accuracy(5) - 0.6).abs() < 1e-9);

@@ -37,8 +37,11 @@ use serde_json::json;
 /// First seed of held-out scenes and messages; training draws only seeds below it.
 pub const HELD_OUT_SEED: u64 = 500_000;
 
+/// Phrase file of the held-out intent messages.
+pub const HELD_OUT_PHRASES: &str = "deploy/llm/intents/heldout.txt";
+
 /// The scenarios advice scenes are drawn from.
-const SCENARIOS: [ScenarioKind; 4] = [
+pub const SCENARIOS: [ScenarioKind; 4] = [
     ScenarioKind::LeftTurn,
     ScenarioKind::LeftTurnPriority,
     ScenarioKind::Merge,

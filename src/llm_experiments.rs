@@ -25,11 +25,22 @@ use concord_sim::world::World;
 
 /// Concord's LLM advisor in the simulation; also the client of the prompt comparison.
 pub struct LlmAdvisor {
-    client: LlmClient,
-    rt: tokio::runtime::Runtime,
-    cfg: SidecarConfig,
+    pub client: LlmClient,
+    pub rt: tokio::runtime::Runtime,
+    /// The sidecar's defaults, `llm.fine_tuned` set when the server has an adapter loaded.
+    pub cfg: SidecarConfig,
     /// The model the server reports.
-    model: String,
+    pub model: String,
+}
+
+/// Whether the llama.cpp server at `url` (ending in `/v1`) has a LoRA adapter loaded.
+async fn has_adapter(url: &str) -> bool {
+    let root = url.trim_end_matches('/').trim_end_matches("/v1");
+    let Ok(r) = reqwest::get(format!("{root}/lora-adapters")).await else {
+        return false;
+    };
+    let v: serde_json::Value = r.json().await.unwrap_or_default();
+    v.as_array().is_some_and(|a| !a.is_empty())
 }
 
 impl LlmAdvisor {
@@ -51,7 +62,7 @@ impl LlmAdvisor {
                 "no LLM server answers at {url} ({e}); start one with `deploy/llm/llm.sh start`"
             )
         })?;
-        cfg.llm.fine_tuned = rt.block_on(crate::advisor_eval::has_adapter(url));
+        cfg.llm.fine_tuned = rt.block_on(has_adapter(url));
         Ok(LlmAdvisor {
             client: LlmClient::new(&llm)?,
             rt,

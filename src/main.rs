@@ -345,7 +345,7 @@ enum LearnArg {
         #[arg(long, default_value = "deploy/llm/intents/train.txt")]
         phrases: PathBuf,
         /// Phrase file of the held-out messages (other templates and words).
-        #[arg(long, default_value = "deploy/llm/intents/heldout.txt")]
+        #[arg(long, default_value = learn::HELD_OUT_PHRASES)]
         heldout_phrases: PathBuf,
         /// Interaction logs of the sidecar to add (`log.jsonl`), repeatable.
         #[arg(long)]

@@ -102,7 +102,7 @@ cmd_setup_train() {
     echo "llm.sh: training environment ready ($train_venv, converters in $llama_cpp)"
 }
 
-# Threads and CPUs of the server: cores - 1 threads, on every CPU but the core's.
+# The server's CPUs: every CPU but the core's.
 server_cpus() {
     local n core cpus=()
     n="$(nproc)"
@@ -196,14 +196,14 @@ cmd_start() {
         fi
         mkdir -p "$run_dir"
         : >"$log_file"
-        local args=(--port "$port") threads cpus
+        local args=(--port "$port") cpus
         case "$adapter" in
             none) ;;
             default) [ -f "$default_adapter" ] && args+=(--adapter "$default_adapter") ;;
             *) [ -f "$adapter" ] || die "adapter not found: $adapter"; args+=(--adapter "$adapter") ;;
         esac
-        threads="${CONCORD_LLM_THREADS:-$(( $(nproc) > 1 ? $(nproc) - 1 : 1 ))}"
-        args+=(--threads "$threads")
+        # serve.py's default is cores - 1 threads.
+        [ -n "${CONCORD_LLM_THREADS:-}" ] && args+=(--threads "$CONCORD_LLM_THREADS")
         cpus="$(server_cpus)"
         if [ -n "$cpus" ] && command -v taskset >/dev/null 2>&1; then
             nohup taskset -c "$cpus" "$py" "$here/serve.py" "${args[@]}" </dev/null >>"$log_file" 2>&1 &

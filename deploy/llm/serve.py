@@ -31,12 +31,8 @@ def default_model() -> Path:
 
 
 def default_threads() -> int:
-    """Cores this process may run on, minus one for the decision core; at least 1."""
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:
-        cores = os.cpu_count() or 1
-    return max(1, cores - 1)
+    """The machine's cores minus one for the decision core; at least 1."""
+    return max(1, (os.cpu_count() or 1) - 1)
 
 
 def is_loopback(host: str) -> bool:
