@@ -7,7 +7,8 @@
 //!   5–11 m/s; starts ±15 m) driven by Concord logit-only and stopped at a random moment before
 //!   the conflict resolves. The label is the oracle's: the fastest route-consistent maneuver
 //!   that, rolled out for 8 s against copies of the drivers, never brings the cars within 3 m
-//!   ([`best_maneuver`]). Labels are balanced (none fills more than a third of a set). Scene k
+//!   ([`best_maneuver`]). Labels are balanced (a quarter each in the training set, none above a third in the
+//!   held-out set). Scene k
 //!   of the training set is drawn from seed k, of the held-out set from seed
 //!   [`HELD_OUT_SEED`] + k: the two never share a seed.
 //! * **Intents** ([`intent_examples`]): messages composed from phrase files
@@ -402,11 +403,13 @@ pub fn dataset(
         println!("wrote {} ({} examples)", path.display(), lines.len());
         Ok(())
     };
-    for (name, n, first) in [
-        ("advice_train.jsonl", advice.0, 0),
-        ("advice_heldout.jsonl", advice.1, HELD_OUT_SEED),
+    // Training: the four labels in equal shares, so that the rarest (decelerate) is learned;
+    // held out: none above a third, closer to how often each is best.
+    for (name, n, first, shares) in [
+        ("advice_train.jsonl", advice.0, 0, 4),
+        ("advice_heldout.jsonl", advice.1, HELD_OUT_SEED, 3),
     ] {
-        let set = labelled_scenes(n, n.div_ceil(3), first, &SCENARIOS, name)?;
+        let set = labelled_scenes(n, n.div_ceil(shares), first, &SCENARIOS, name)?;
         let lines: Vec<_> = set
             .iter()
             .map(|s| {
@@ -532,10 +535,14 @@ mod tests {
             );
         }
         assert!(counts.iter().all(|c| *c <= 3), "{counts:?}");
-        // Rendered as the sidecar renders a request.
-        let cfg = SidecarConfig::default();
+        // Rendered as the sidecar renders a request: for the fine-tuned model by default, in
+        // full for any other.
+        let mut cfg = SidecarConfig::default();
         let m = advice_prompt(&cfg, &set[0]);
         assert_eq!(m.len(), 2);
-        assert!(m[1].content.contains("P_n:"));
+        assert!(m[1].content.starts_with("ego "), "{}", m[1].content);
+        assert!(m[1].content.contains("\nP acc "));
+        cfg.llm.fine_tuned = false;
+        assert!(advice_prompt(&cfg, &set[0])[1].content.contains("P_n:"));
     }
 }

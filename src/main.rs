@@ -88,7 +88,7 @@ enum ExperimentArg {
         /// episode at a time: the server has one slot).
         #[arg(long)]
         llm: Option<String>,
-        /// Repetitions per speed of the LLM runs (left turn).
+        /// Repetitions per speed of the LLM runs (the left turn and the merge).
         #[arg(long, default_value_t = 3)]
         llm_reps: u32,
     },
@@ -330,13 +330,13 @@ enum LearnArg {
         #[arg(long)]
         config: Option<PathBuf>,
         /// Advice scenes for training (seeds from 0).
-        #[arg(long, default_value_t = 360)]
+        #[arg(long, default_value_t = 600)]
         advice_train: usize,
         /// Held-out advice scenes (seeds from 500 000).
         #[arg(long, default_value_t = 150)]
         advice_heldout: usize,
         /// Intent messages for training.
-        #[arg(long, default_value_t = 400)]
+        #[arg(long, default_value_t = 500)]
         intents_train: usize,
         /// Held-out intent messages (from the held-out phrase file).
         #[arg(long, default_value_t = 150)]
@@ -1253,11 +1253,12 @@ fn experiment(
     eprintln!();
     let mut outcomes = outcomes;
     if let Some((mut advisor, url, reps)) = llm {
-        // The LLM runs: left turns, one at a time, the same starts as the grid's first reps.
+        // The LLM runs: the paper's left turns and merges, one at a time, the same starts as
+        // the grid's first reps.
         let episodes: Vec<_> = grid
             .iter()
             .filter(|e| {
-                e.scenario == ScenarioKind::LeftTurn
+                matches!(e.scenario, ScenarioKind::LeftTurn | ScenarioKind::Merge)
                     && e.controller == ControllerKind::ConcordLogit
                     && e.rep < reps
             })

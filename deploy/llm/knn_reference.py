@@ -25,23 +25,29 @@ def load(path: Path) -> list:
     return [json.loads(line) for line in path.open() if line.strip()]
 
 
+SHORT = {"acc": "accelerate", "dec": "decelerate", "keep": "keep_speed", "left": "turn_left",
+         "right": "turn_right"}
+
+
 def p_n(scene: dict) -> dict:
-    line = re.search(r"P_n: (.*)\.", scene["messages"][1]["content"]).group(1)
-    return {k: float(v) for k, v in re.findall(r"(\w+) (\d+)%", line)}
+    """P_n in %, from the short OPM form the fine-tuned prompts use (`P acc 1 dec 98 ...`)."""
+    line = re.search(r"^P (.*)$", scene["messages"][1]["content"], re.M).group(1)
+    return {SHORT[k]: float(v) for k, v in re.findall(r"(\w+) (\d+)", line)}
 
 
 def features(scene: dict) -> list:
     text = scene["messages"][1]["content"]
     p = p_n(scene)
-    f = [1.0 if "turns left" in text else 0.0] + [p.get(n, 0.0) for n in NAMES]
+    f = [1.0 if text.startswith("ego left") else 0.0] + [p.get(n, 0.0) for n in NAMES]
     ego = [float(v) for v in re.findall(r"-?\d+\.?\d*", text.split("\n")[0])]
     f += (ego + [0.0] * 4)[:4]
-    m = re.search(r"in (-?\d+\.?\d*) s, ego in (-?\d+\.?\d*) s, dTTC (-?\d+\.?\d*)", text)
-    f += [float(v) for v in m.groups()] if m else [99.0, 99.0, 99.0]
-    m = re.search(r"yielding (\d+)%, proceeding (\d+)%", text)
+    m = re.search(r" at (-?\d+\.?\d*) ego (-?\d+\.?\d*)", text)
+    f += ([float(v) for v in m.groups()] + [abs(float(m[1]) - float(m[2]))] if m
+          else [99.0, 99.0, 99.0])
+    m = re.search(r"yield (\d+) go (\d+)", text)
     f += [float(v) for v in m.groups()] if m else [0.0, 0.0]
-    f += [1.0 if "right of way: ego" in text else 0.0,
-          1.0 if "right of way: other" in text else 0.0, float(text.count("\nV"))]
+    f += [1.0 if " row ego" in text else 0.0,
+          1.0 if " row other" in text else 0.0, float(text.count("\nV"))]
     return f
 
 

@@ -61,9 +61,10 @@ pub struct LlmConfig {
     pub temperature: f64,
     /// The model was fine-tuned on Concord's prompts (the adapter in `deploy/llm/adapters`):
     /// each prompt's system message then names the task in one line
-    /// ([`crate::prompt::TUNED_ADVICE_PREFIX`]) instead of instructing a general model, about
-    /// 150 prompt tokens fewer per advice request. On by default, as the local server loads the
-    /// adapter (`deploy/llm/llm.sh start`); turn it off for any other model.
+    /// ([`crate::prompt::TUNED_ADVICE_PREFIX`]) instead of instructing a general model, and the
+    /// OPM scene comes in the short form it was trained on: about 150 prompt tokens fewer for the
+    /// prefix and half the scene's. On by default, as the local server loads the adapter
+    /// (`deploy/llm/llm.sh start`); turn it off for any other model.
     pub fine_tuned: bool,
 }
 

@@ -16,6 +16,7 @@ pub mod prompt;
 pub mod reply;
 pub mod schema;
 pub mod service;
+pub mod slots;
 pub mod untrusted;
 
 use std::sync::atomic::AtomicU64;

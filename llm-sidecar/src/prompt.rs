@@ -13,7 +13,9 @@ use std::fmt::Write;
 
 use concord_core::scene::{AgentKind, IntentAction, Style, Task, Turn, TurnSignal};
 use concord_core::Maneuver;
-use concord_ipc::wire::{AdviceRequest, SceneFrame, WireAgent, WireConflict, WireIntent, UNKNOWN};
+use concord_ipc::wire::{
+    AdviceRequest, SceneFrame, WireAgent, WireConflict, WireIntent, WireObject, UNKNOWN,
+};
 use serde::Serialize;
 
 use crate::config::PromptFormat;
@@ -148,12 +150,18 @@ pub fn describe_intent(i: &WireIntent) -> Option<String> {
 /// "task emergency (confidence 0.82), action proceed (confidence 0.95)" for the dimensions of
 /// `i` at or above `weak_below` (eq. 8's priority order: task, action, style), or `None`.
 pub fn describe_stated(i: &WireIntent, weak_below: f64) -> Option<String> {
+    stated_parts(i, weak_below, "confidence ")
+}
+
+/// The dimensions of `i` at or above `weak_below`, task first, each as "task emergency
+/// (`label`0.82)".
+fn stated_parts(i: &WireIntent, weak_below: f64, label: &str) -> Option<String> {
     let strong = |c: f32| c.is_finite() && f64::from(c) >= weak_below && c <= 1.0;
     let mut parts = Vec::new();
     if let Ok(t) = Task::try_from(i.task) {
         if strong(i.task_confidence) {
             parts.push(format!(
-                "task {} (confidence {:.2})",
+                "task {} ({label}{:.2})",
                 task_name(t),
                 i.task_confidence
             ));
@@ -162,7 +170,7 @@ pub fn describe_stated(i: &WireIntent, weak_below: f64) -> Option<String> {
     if let Ok(a) = IntentAction::try_from(i.action) {
         if strong(i.action_confidence) {
             parts.push(format!(
-                "action {} (confidence {:.2})",
+                "action {} ({label}{:.2})",
                 action_name(a),
                 i.action_confidence
             ));
@@ -171,7 +179,7 @@ pub fn describe_stated(i: &WireIntent, weak_below: f64) -> Option<String> {
     if let Ok(s) = Style::try_from(i.style) {
         if strong(i.style_confidence) {
             parts.push(format!(
-                "style {} (confidence {:.2})",
+                "style {} ({label}{:.2})",
                 style_name(s),
                 i.style_confidence
             ));
@@ -217,6 +225,22 @@ fn short_stop_line(d: f64) -> String {
     }
 }
 
+/// The request's objects, the `max_objects` most salient (eq. 7) first.
+fn most_salient(r: &AdviceRequest, max_objects: usize) -> Vec<&WireObject> {
+    let n = (r.n_objects as usize).min(r.objects.len());
+    let mut objects: Vec<&WireObject> = r.objects[..n].iter().collect();
+    objects.sort_by(|a, b| b.saliency.total_cmp(&a.saliency));
+    objects.truncate(max_objects);
+    objects
+}
+
+/// The conflict of object `o` with the ego, if it has one.
+fn conflict_of<'a>(r: &'a AdviceRequest, o: &WireObject) -> Option<&'a WireConflict> {
+    (o.conflict != UNKNOWN && o.conflict < r.n_conflicts)
+        .then(|| r.conflicts.get(o.conflict as usize))
+        .flatten()
+}
+
 /// The scene of `r` as objects, processes and relations (eq. 6): the `max_objects` most
 /// salient objects (eq. 7), each with its process and its relations to the ego.
 fn opm_scene(r: &AdviceRequest, max_objects: usize, out: &mut String) {
@@ -237,10 +261,7 @@ fn opm_scene(r: &AdviceRequest, max_objects: usize, out: &mut String) {
         );
     }
     let n = (r.n_objects as usize).min(r.objects.len());
-    let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by(|&a, &b| r.objects[b].saliency.total_cmp(&r.objects[a].saliency));
-    for &i in order.iter().take(max_objects) {
-        let o = &r.objects[i];
+    for o in most_salient(r, max_objects) {
         let a = &o.state;
         let p = &o.process;
         let _ = write!(
@@ -254,8 +275,7 @@ fn opm_scene(r: &AdviceRequest, max_objects: usize, out: &mut String) {
             motion(p.accel_mps2, p.theta_a),
             signal(a.turn_signal)
         );
-        if o.conflict != UNKNOWN && o.conflict < r.n_conflicts {
-            let c = &r.conflicts[o.conflict as usize];
+        if let Some(c) = conflict_of(r, o) {
             let _ = write!(
                 out,
                 " Conflict: V{} in {:.1} s, ego in {:.1} s, dTTC {:.1} s{}; {}.",
@@ -284,6 +304,115 @@ fn opm_scene(r: &AdviceRequest, max_objects: usize, out: &mut String) {
     if n == 0 {
         out.push_str("No other road user is relevant.\n");
     }
+}
+
+/// The OPM scene of `r` in the short form a fine-tuned model reads (`LlmConfig::fine_tuned`):
+/// the same objects, processes and relations as [`opm_scene`], about half the tokens, since
+/// prompt processing dominates the advice's latency on one thread. Per line: the ego (route,
+/// distance to its stop line in m, negative past it, speed m/s, acceleration m/s²); each object,
+/// the most salient first (kind, importance, the same three quantities, then its conflict: its
+/// and the ego's time to arrival in s, "risky", its implicit intent in % or "committed", and
+/// who has the right of way); P_n in % (acc, dec, keep, left, right); stated intents.
+fn opm_compact(r: &AdviceRequest, max_objects: usize, stated: &str, out: &mut String) {
+    fn stop(d: f64) -> String {
+        if !d.is_finite() || d > 1e6 {
+            "off".into()
+        } else {
+            format!("{:.0}m", d.clamp(-1e6, 1e6))
+        }
+    }
+    fn accel(a: f64, theta_a: f64) -> String {
+        let mut s = if a.abs() < 0.2 {
+            "0".to_string()
+        } else {
+            format!("{a:.1}")
+        };
+        let deg = theta_a.to_degrees().abs();
+        if (15.0..=165.0).contains(&deg) {
+            let _ = write!(s, " turning {deg:.0}");
+        }
+        s
+    }
+    let e = &r.ego;
+    let route = match Turn::try_from(r.route_turn) {
+        Ok(Turn::Left) => "left",
+        Ok(Turn::Right) => "right",
+        _ => "straight",
+    };
+    let _ = writeln!(
+        out,
+        "ego {route} {} {:.1} {}",
+        stop(e.dist_to_stop_m),
+        e.speed_mps,
+        accel(e.accel_mps2, e.theta_a)
+    );
+    if r.leader_gap_m < 1e6 {
+        let _ = writeln!(
+            out,
+            "leader {:.0}m {:.1}",
+            r.leader_gap_m, r.leader_speed_mps
+        );
+    }
+    let n = (r.n_objects as usize).min(r.objects.len());
+    for o in most_salient(r, max_objects) {
+        let a = &o.state;
+        let p = &o.process;
+        let _ = write!(
+            out,
+            "V{} {} {:.0}% {} {:.1} {}{}",
+            a.id,
+            kind(a.kind),
+            o.saliency * 100.0,
+            stop(p.dist_to_stop_m),
+            p.speed_mps,
+            accel(p.accel_mps2, p.theta_a),
+            match TurnSignal::try_from(a.turn_signal) {
+                Ok(TurnSignal::Left) => " signal left",
+                Ok(TurnSignal::Right) => " signal right",
+                Ok(TurnSignal::Hazard) => " hazard",
+                _ => "",
+            }
+        );
+        if let Some(c) = conflict_of(r, o) {
+            let _ = write!(
+                out,
+                " at {:.1} ego {:.1}{}",
+                c.agent_ttc_s,
+                c.ego_ttc_s,
+                if c.risky != 0 { " risky" } else { "" }
+            );
+            if c.committed != 0 {
+                out.push_str(" committed");
+            } else {
+                let _ = write!(
+                    out,
+                    " yield {:.0} go {:.0}",
+                    c.yielding * 100.0,
+                    c.proceeding * 100.0
+                );
+            }
+            let _ = write!(out, " row {}", right_of_way(c.right_of_way));
+        } else if o.longitudinal_m < 1e6 {
+            let _ = write!(out, " ahead {:.0}m", o.longitudinal_m);
+        }
+        if let Some(i) = describe_intent(&a.intent) {
+            let _ = write!(out, " intent {i}");
+        }
+        out.push('\n');
+    }
+    if n > max_objects {
+        let _ = writeln!(out, "{} more", n - max_objects);
+    }
+    if n == 0 {
+        out.push_str("nobody\n");
+    }
+    let p = r.p_corrected.map(|p| p * 100.0);
+    let _ = writeln!(
+        out,
+        "P acc {:.0} dec {:.0} keep {:.0} left {:.0} right {:.0}",
+        p[0], p[1], p[2], p[3], p[4]
+    );
+    out.push_str(stated);
 }
 
 /// Who has the right of way at a conflict (`RightOfWay` code, A = the ego).
@@ -334,8 +463,7 @@ fn simple_scene(r: &AdviceRequest, out: &mut String) {
             o.process.accel_mps2,
             o.process.dist_to_stop_m.min(999.0)
         );
-        if o.conflict != UNKNOWN && o.conflict < r.n_conflicts {
-            let c = &r.conflicts[o.conflict as usize];
+        if let Some(c) = conflict_of(r, o) {
             let _ = write!(
                 out,
                 " ttc={:.1} ego_ttc={:.1} yielding={:.2} proceeding={:.2} committed={} right_of_way={}",
@@ -391,19 +519,35 @@ fn raw_scene(r: &AdviceRequest, history: &[SceneFrame], step_s: f64, out: &mut S
 
 /// The intents people stated: the passenger's as parsed (else as the request carries it), each
 /// road user's as parsed from its own messages; dimensions below `weak_below` are left out.
-fn stated_intents(r: &AdviceRequest, stated: &Stated, weak_below: f64, out: &mut String) {
+/// In the short form (`compact`), "passenger says task emergency (0.82)" and "V3 says …".
+fn stated_intents(
+    r: &AdviceRequest,
+    stated: &Stated,
+    weak_below: f64,
+    compact: bool,
+    out: &mut String,
+) {
     let known = |i: &WireIntent| [i.style, i.action, i.task].iter().any(|c| *c != UNKNOWN);
     let passenger = if known(&stated.passenger) {
         &stated.passenger
     } else {
         &r.ego_intent
     };
-    if let Some(i) = describe_stated(passenger, weak_below) {
-        let _ = writeln!(out, "The passenger's stated intent: {i}.");
+    let label = if compact { "" } else { "confidence " };
+    if let Some(i) = stated_parts(passenger, weak_below, label) {
+        if compact {
+            let _ = writeln!(out, "passenger says {i}");
+        } else {
+            let _ = writeln!(out, "The passenger's stated intent: {i}.");
+        }
     }
     for (id, intent) in &stated.road_users {
-        if let Some(i) = describe_stated(intent, weak_below) {
-            let _ = writeln!(out, "V{id}'s stated intent: {i}.");
+        if let Some(i) = stated_parts(intent, weak_below, label) {
+            if compact {
+                let _ = writeln!(out, "V{id} says {i}");
+            } else {
+                let _ = writeln!(out, "V{id}'s stated intent: {i}.");
+            }
         }
     }
 }
@@ -411,8 +555,8 @@ fn stated_intents(r: &AdviceRequest, stated: &Stated, weak_below: f64, out: &mut
 /// The advice prompt for request `r`: the static prefix, then the scene in `format` (OPM
 /// with its `max_objects` most salient objects), P_n and the intents people stated (at or above
 /// `weak_below`). `history` (oldest first) is used by the Raw rendering only. A `tuned` model
-/// gets [`TUNED_ADVICE_PREFIX`] (OPM only: the rendering it was trained on) in place of the
-/// instructions.
+/// gets [`TUNED_ADVICE_PREFIX`] in place of the instructions and the short OPM form it was
+/// trained on ([`opm_compact`]; OPM without reasoning steps only).
 #[allow(clippy::too_many_arguments)]
 pub fn advice_messages(
     format: PromptFormat,
@@ -425,19 +569,26 @@ pub fn advice_messages(
     tuned: bool,
 ) -> Vec<ChatMessage> {
     let mut user = String::with_capacity(1024);
+    if tuned && format == PromptFormat::Opm && steps == 0 {
+        let mut said = String::new();
+        stated_intents(r, stated, weak_below, true, &mut said);
+        opm_compact(r, max_objects, &said, &mut user);
+        return vec![
+            ChatMessage::system(TUNED_ADVICE_PREFIX),
+            ChatMessage::user(user),
+        ];
+    }
     match format {
         PromptFormat::Opm => opm_scene(r, max_objects, &mut user),
         PromptFormat::Simple => simple_scene(r, &mut user),
         PromptFormat::Raw => raw_scene(r, history, 0.1, &mut user),
     }
     let _ = writeln!(user, "P_n: {}.", probabilities(&r.p_corrected));
-    stated_intents(r, stated, weak_below, &mut user);
-    let system = if tuned && format == PromptFormat::Opm && steps == 0 {
-        TUNED_ADVICE_PREFIX.to_string()
-    } else {
-        advice_prefix(format, steps)
-    };
-    vec![ChatMessage::system(system), ChatMessage::user(user)]
+    stated_intents(r, stated, weak_below, false, &mut user);
+    vec![
+        ChatMessage::system(advice_prefix(format, steps)),
+        ChatMessage::user(user),
+    ]
 }
 
 /// Static prefix of the eHMI phrasing prompt (§5 step 2: the decision back into language).
@@ -577,6 +728,76 @@ mod tests {
             .content
             .contains("task emergency (confidence 0.82)"));
         assert!(!reply[1].content.contains("<msg>"));
+    }
+
+    #[test]
+    fn the_tuned_rendering_states_the_same_scene_in_half_the_text() {
+        use concord_ipc::wire::{WireProcess, WIRE_OBJECTS};
+        let mut objects = [WireObject::default(); WIRE_OBJECTS];
+        objects[0].state.id = 2;
+        objects[0].saliency = 0.56;
+        objects[0].process = WireProcess {
+            dist_to_stop_m: 40.0,
+            speed_mps: 9.4,
+            accel_mps2: -0.4,
+            ..WireProcess::default()
+        };
+        objects[0].conflict = 0;
+        let mut conflicts = [WireConflict::default(); WIRE_OBJECTS];
+        conflicts[0] = WireConflict {
+            agent_ttc_s: 4.8,
+            ego_ttc_s: 4.4,
+            risky: 1,
+            yielding: 0.1,
+            proceeding: 0.3,
+            right_of_way: 2,
+            ..WireConflict::default()
+        };
+        let r = AdviceRequest {
+            request_id: 1,
+            scene_sequence: 1,
+            issued_ns: 0,
+            deadline_ns: 0,
+            p_logit: [0.2; 5],
+            p_corrected: [0.01, 0.98, 0.01, 0.0, 0.0],
+            ego: WireProcess {
+                dist_to_stop_m: 9.0,
+                speed_mps: 6.6,
+                accel_mps2: -2.8,
+                ..WireProcess::default()
+            },
+            ego_intent: WireIntent::default(),
+            objects,
+            conflicts,
+            leader_gap_m: f64::MAX,
+            leader_speed_mps: 0.0,
+            route_turn: Turn::Left as u8,
+            n_objects: 1,
+            n_conflicts: 1,
+            reserved: [0; 5],
+        };
+        let stated = Stated {
+            passenger: WireIntent {
+                task: Task::Emergency as u8,
+                task_confidence: 0.82,
+                ..WireIntent::default()
+            },
+            road_users: vec![],
+        };
+        let tuned = advice_messages(PromptFormat::Opm, 0, 3, &r, &[], &stated, 0.7, true);
+        let full = advice_messages(PromptFormat::Opm, 0, 3, &r, &[], &stated, 0.7, false);
+        assert_eq!(tuned[0].content, TUNED_ADVICE_PREFIX);
+        assert_eq!(
+            tuned[1].content,
+            "ego left 9m 6.6 -2.8\n\
+             V2 car 56% 40m 9.4 -0.4 at 4.8 ego 4.4 risky yield 10 go 30 row other\n\
+             P acc 1 dec 98 keep 1 left 0 right 0\n\
+             passenger says task emergency (0.82)\n"
+        );
+        assert!(tuned[1].content.len() * 2 < full[1].content.len());
+        // With reasoning steps the instructions and the full rendering come back.
+        let steps = advice_messages(PromptFormat::Opm, 2, 3, &r, &[], &stated, 0.7, true);
+        assert_eq!(steps[1].content, full[1].content);
     }
 
     #[test]

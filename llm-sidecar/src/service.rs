@@ -38,7 +38,7 @@ use concord_ipc::wire::{
 };
 use hdrhistogram::Histogram;
 use serde_json::json;
-use tokio::sync::{mpsc, watch, Semaphore};
+use tokio::sync::{mpsc, watch};
 
 use crate::bus::{History, Outbound};
 use crate::config::SidecarConfig;
@@ -49,6 +49,7 @@ use crate::llm::{LlmClient, LlmError, Reply};
 use crate::prompt::{self, Stated};
 use crate::reply::{Answer, ReplyError};
 use crate::schema::{self, AdviceAnswer, IntentAnswer};
+use crate::slots::Slots;
 
 /// The bus publishes (and stamps) an answer up to one period after it is ready: leave that
 /// much before the deadline.
@@ -117,7 +118,7 @@ struct State {
 pub struct Sidecar {
     cfg: SidecarConfig,
     client: LlmClient,
-    slots: Semaphore,
+    slots: Slots,
     state: Mutex<State>,
     out: std_mpsc::Sender<Outbound>,
     history: History,
@@ -187,7 +188,7 @@ impl Sidecar {
     ) -> Self {
         let hist = |hi| Histogram::new_with_bounds(1, hi, 2).expect("histogram bounds");
         Sidecar {
-            slots: Semaphore::new(cfg.llm.max_in_flight),
+            slots: Slots::new(cfg.llm.max_in_flight),
             state: Mutex::new(State {
                 dialogue: Dialogue::new(cfg.intent.dialogue_turns, cfg.intent.max_parties),
                 road_users: BTreeMap::new(),
@@ -417,14 +418,17 @@ impl Sidecar {
         deadline: Deadline,
         decode: impl FnOnce(&Answer) -> Result<T, ReplyError>,
     ) -> Result<(T, Reply), LlmError> {
-        let (queue_until, call_until) = match deadline {
-            Deadline::At(t) => (t, None),
-            Deadline::AfterQueue { queue, call } => (Instant::now() + queue, Some(call)),
+        let permit = match deadline {
+            Deadline::At(t) => self.slots.urgent(t.into()).await.map(|p| (p, t)),
+            Deadline::AfterQueue { queue, call } => {
+                let queue_until = Instant::now() + queue;
+                let p = self.slots.routine(queue_until.into()).await;
+                p.map(|p| (p, Instant::now() + call))
+            }
         };
-        let Some(_permit) = self.slot(queue_until).await else {
+        let Some((_permit, until)) = permit else {
             return Err(LlmError::Timeout);
         };
-        let until = call_until.map_or(queue_until, |c| Instant::now() + c);
         let reply = self.client.call(body, until).await?;
         let value = decode(&reply.answer).map_err(LlmError::Reply)?;
         Ok((value, reply))
@@ -436,14 +440,6 @@ impl Sidecar {
             queue: Duration::from_secs_f64(self.cfg.intent.queue_s),
             call: Duration::from_secs_f64(self.cfg.intent.deadline_s),
         }
-    }
-
-    /// A request slot, or `None` if none frees up before `deadline`.
-    async fn slot(&self, deadline: Instant) -> Option<tokio::sync::SemaphorePermit<'_>> {
-        tokio::time::timeout_at(deadline.into(), self.slots.acquire())
-            .await
-            .ok()?
-            .ok()
     }
 
     // ---- intents ------------------------------------------------------------------------

@@ -235,7 +235,10 @@ fn prompt_vocabulary(request: &AdviceRequest) -> BTreeSet<String> {
         )
         .collect();
     for i in every_intent() {
-        for format in PromptFormat::ALL {
+        for (format, tuned) in PromptFormat::ALL
+            .into_iter()
+            .flat_map(|f| [(f, false), (f, true)])
+        {
             let stated = Stated {
                 passenger: i,
                 road_users: vec![(1, i)],
@@ -248,7 +251,7 @@ fn prompt_vocabulary(request: &AdviceRequest) -> BTreeSet<String> {
                 &[],
                 &stated,
                 0.7,
-                false,
+                tuned,
             ));
         }
         add(prompt::reply_messages(

@@ -1,0 +1,106 @@
+//! The server's request slots, advice first: an advice request has a core deadline, a message's
+//! parse or an eHMI phrasing does not, so a routine call that waits for a slot lets every
+//! waiting advice request go before it. A call already in flight is not interrupted.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use tokio::sync::{Notify, Semaphore, SemaphorePermit};
+use tokio::time::Instant;
+
+/// `max_in_flight` slots shared by urgent (advice) and routine calls.
+pub struct Slots {
+    sem: Semaphore,
+    /// Urgent calls waiting for a slot.
+    urgent_waiting: AtomicUsize,
+    /// Signalled each time an urgent call stops waiting.
+    urgent_left: Notify,
+}
+
+impl Slots {
+    pub fn new(max_in_flight: usize) -> Self {
+        Slots {
+            sem: Semaphore::new(max_in_flight),
+            urgent_waiting: AtomicUsize::new(0),
+            urgent_left: Notify::new(),
+        }
+    }
+
+    /// A slot for an advice request, before every routine call waiting, or `None` if none
+    /// frees up before `deadline`.
+    pub async fn urgent(&self, deadline: Instant) -> Option<SemaphorePermit<'_>> {
+        self.urgent_waiting.fetch_add(1, Ordering::SeqCst);
+        let permit = tokio::time::timeout_at(deadline, self.sem.acquire()).await;
+        self.urgent_waiting.fetch_sub(1, Ordering::SeqCst);
+        self.urgent_left.notify_waiters();
+        permit.ok()?.ok()
+    }
+
+    /// A slot once no advice request waits for one, or `None` if none is left before
+    /// `deadline`.
+    pub async fn routine(&self, deadline: Instant) -> Option<SemaphorePermit<'_>> {
+        tokio::time::timeout_at(deadline, async {
+            loop {
+                // Registered before the check, so that no signal falls between the two.
+                let left = self.urgent_left.notified();
+                if self.urgent_waiting.load(Ordering::SeqCst) == 0 {
+                    let permit = self.sem.acquire().await.ok()?;
+                    if self.urgent_waiting.load(Ordering::SeqCst) == 0 {
+                        return Some(permit);
+                    }
+                    // An urgent call queued behind this one while it waited: it goes first.
+                    drop(permit);
+                }
+                left.await;
+            }
+        })
+        .await
+        .ok()?
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Arc;
+    use std::time::Duration;
+
+    #[tokio::test(start_paused = true)]
+    async fn advice_waiting_goes_before_routine_calls_queued_earlier() {
+        let slots = Arc::new(Slots::new(1));
+        let far = Instant::now() + Duration::from_secs(60);
+        let order = Arc::new(std::sync::Mutex::new(Vec::new()));
+        let held = slots.routine(far).await.unwrap();
+        let spawn = |name: &'static str, urgent: bool| {
+            let (slots, order) = (slots.clone(), order.clone());
+            tokio::spawn(async move {
+                let p = if urgent {
+                    slots.urgent(far).await
+                } else {
+                    slots.routine(far).await
+                };
+                assert!(p.is_some(), "{name} got no slot");
+                order.lock().unwrap().push(name);
+                tokio::time::sleep(Duration::from_millis(10)).await;
+            })
+        };
+        let routine = spawn("routine", false);
+        tokio::time::sleep(Duration::from_millis(1)).await;
+        let advice = spawn("advice", true);
+        tokio::time::sleep(Duration::from_millis(1)).await;
+        drop(held);
+        advice.await.unwrap();
+        routine.await.unwrap();
+        assert_eq!(*order.lock().unwrap(), ["advice", "routine"]);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_slot_that_does_not_free_up_in_time_is_none() {
+        let slots = Slots::new(1);
+        let soon = Instant::now() + Duration::from_millis(50);
+        let _held = slots.urgent(soon).await.unwrap();
+        assert!(slots.urgent(soon).await.is_none());
+        assert!(slots.routine(soon).await.is_none());
+        // Neither timed-out waiter is left counted as waiting.
+        assert_eq!(slots.urgent_waiting.load(Ordering::SeqCst), 0);
+    }
+}
