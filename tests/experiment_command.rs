@@ -115,15 +115,17 @@ fn experiment_paper_with_the_local_llm_runs_both_timing_modes() {
         "experiment-llm",
         &["--reps", "1", "--llm", &llm.url, "--llm-reps", "1"],
     );
-    for c in ["concord_llm_wait", "concord_llm_latency"] {
-        for speed in [6, 8, 10] {
-            assert!(
-                stdout.contains(&format!("| left_turn | {c} | {speed} | 1 | 0 |")),
-                "{c} {speed}"
-            );
+    for scenario in ["left_turn", "merge"] {
+        for c in ["concord_llm_wait", "concord_llm_latency"] {
+            for speed in [6, 8, 10] {
+                assert!(
+                    stdout.contains(&format!("| {scenario} | {c} | {speed} | 1 | 0 |")),
+                    "{scenario} {c} {speed}"
+                );
+            }
         }
     }
     let episodes = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
-    assert_eq!(episodes.lines().count(), 1 + 24 + 6);
+    assert_eq!(episodes.lines().count(), 1 + 24 + 12);
     std::fs::remove_dir_all(&out).unwrap();
 }
