@@ -1,11 +1,15 @@
 //! The server's request slots, advice first: an advice request has a core deadline, a message's
 //! parse or an eHMI phrasing does not, so a routine call that waits for a slot lets every
-//! waiting advice request go before it. A call already in flight is not interrupted.
+//! waiting advice request go before it, for at most 2 s. A call already in flight is not
+//! interrupted.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use tokio::sync::{Notify, Semaphore, SemaphorePermit};
 use tokio::time::Instant;
+
+/// Longest a routine call lets advice requests go first, s.
+const ROUTINE_PATIENCE: std::time::Duration = std::time::Duration::from_secs(2);
 
 /// `max_in_flight` slots shared by urgent (advice) and routine calls.
 pub struct Slots {
@@ -38,19 +42,24 @@ impl Slots {
     /// A slot once no advice request waits for one, or `None` if none is left before
     /// `deadline`.
     pub async fn routine(&self, deadline: Instant) -> Option<SemaphorePermit<'_>> {
+        // After `ROUTINE_PATIENCE` it stops deferring: advice asked for every cycle must not
+        // starve a message's parse.
+        let defer_until = Instant::now() + ROUTINE_PATIENCE;
+        let deferring =
+            || self.urgent_waiting.load(Ordering::SeqCst) > 0 && Instant::now() < defer_until;
         tokio::time::timeout_at(deadline, async {
             loop {
                 // Registered before the check, so that no signal falls between the two.
                 let left = self.urgent_left.notified();
-                if self.urgent_waiting.load(Ordering::SeqCst) == 0 {
+                if !deferring() {
                     let permit = self.sem.acquire().await.ok()?;
-                    if self.urgent_waiting.load(Ordering::SeqCst) == 0 {
+                    if !deferring() {
                         return Some(permit);
                     }
                     // An urgent call queued behind this one while it waited: it goes first.
                     drop(permit);
                 }
-                left.await;
+                let _ = tokio::time::timeout_at(defer_until, left).await;
             }
         })
         .await
