@@ -8,7 +8,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use tokio::sync::{Notify, Semaphore, SemaphorePermit};
 use tokio::time::Instant;
 
-/// Longest a routine call lets advice requests go first, s.
+/// Longest a routine call lets advice requests go first.
 const ROUTINE_PATIENCE: std::time::Duration = std::time::Duration::from_secs(2);
 
 /// `max_in_flight` slots shared by urgent (advice) and routine calls.
@@ -100,6 +100,38 @@ mod tests {
         advice.await.unwrap();
         routine.await.unwrap();
         assert_eq!(*order.lock().unwrap(), ["advice", "routine"]);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn after_its_patience_a_routine_call_goes_before_later_advice() {
+        let slots = Arc::new(Slots::new(1));
+        let far = Instant::now() + Duration::from_secs(60);
+        let order = Arc::new(std::sync::Mutex::new(Vec::new()));
+        let held = slots.urgent(far).await.unwrap();
+        let spawn = |name: &'static str, urgent: bool| {
+            let (slots, order) = (slots.clone(), order.clone());
+            tokio::spawn(async move {
+                let p = if urgent {
+                    slots.urgent(far).await
+                } else {
+                    slots.routine(far).await
+                };
+                assert!(p.is_some(), "{name} got no slot");
+                order.lock().unwrap().push(name);
+                tokio::time::sleep(Duration::from_millis(10)).await;
+            })
+        };
+        let first = spawn("advice 1", true);
+        tokio::time::sleep(Duration::from_millis(1)).await;
+        let routine = spawn("routine", false);
+        tokio::time::sleep(ROUTINE_PATIENCE + Duration::from_secs(1)).await;
+        let second = spawn("advice 2", true);
+        tokio::time::sleep(Duration::from_millis(1)).await;
+        drop(held);
+        for t in [first, routine, second] {
+            t.await.unwrap();
+        }
+        assert_eq!(*order.lock().unwrap(), ["advice 1", "routine", "advice 2"]);
     }
 
     #[tokio::test(start_paused = true)]
