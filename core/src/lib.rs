@@ -310,7 +310,11 @@ impl DecisionCore {
         self.negotiation.update(
             self.conflicts.pairs(),
             |k| agents[k as usize].id,
-            start.ds.max(0.0),
+            &negotiation::EgoState {
+                speed_mps: start.ds.max(0.0),
+                accel_mps2: p.choice.accelerate_mps2,
+                gives_way: self.last.maneuver.gives_way(),
+            },
             scene.time_s,
             &p.interaction,
         );

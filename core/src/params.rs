@@ -209,6 +209,12 @@ pub struct InteractionParams {
     /// After announcing, the ego watches the other for this long (a reaction time) and goes if
     /// it keeps waiting, s.
     pub watch_s: f64,
+    /// A waiting ego asks an approaching road user to let it go first (announces on the eHMI
+    /// that it goes first) only when that road user could stop before its zone at this
+    /// deceleration or less after `reaction_s`, and no other still could stop but only
+    /// harder, m/s². Well below `max_imposed_decel_mps2`, since drivers brake earlier and
+    /// harder than the kinematic minimum. 0 never asks (traffic that does not read the eHMI).
+    pub request_decel_mps2: f64,
     /// Utility penalty of a maneuver rejected for courtesy (kept finite so the logit stays
     /// defined; large enough that it is never chosen over one that is not rejected).
     pub courtesy_penalty: f64,
@@ -233,6 +239,7 @@ impl Default for InteractionParams {
             creep_speed_mps: 1.0,
             deadlock_after_s: 0.5,
             watch_s: 1.0,
+            request_decel_mps2: 1.5,
             courtesy_penalty: 10.0,
         }
     }
@@ -595,6 +602,12 @@ impl Params {
                 600.0,
             ),
             ("interaction.watch_s", i.watch_s, 0.0, 600.0),
+            (
+                "interaction.request_decel_mps2",
+                i.request_decel_mps2,
+                0.0,
+                20.0,
+            ),
             (
                 "interaction.courtesy_penalty",
                 i.courtesy_penalty,

@@ -9,7 +9,7 @@ use concord_core::choice::{
     EgoContext, Maneuver, Profile,
 };
 use concord_core::intent::{infer, Motion, Stated};
-use concord_core::negotiation::{Negotiation, Phase};
+use concord_core::negotiation::{EgoState, Negotiation, Phase};
 use concord_core::opm::{ConflictPair, ConflictSet, OpmTriplet};
 use concord_core::params::{ChoiceParams, InteractionParams, OpmParams, Params};
 use concord_core::scene::{
@@ -640,27 +640,36 @@ fn waiting(e: f64, d: f64, v: f64, a: f64) -> ConflictPair {
     }
 }
 
+/// The ego at `speed` m/s, starting at 1.5 m/s², after a decision that did not give way.
+fn ego(speed: f64) -> EgoState {
+    EgoState {
+        speed_mps: speed,
+        accel_mps2: 1.5,
+        gives_way: false,
+    }
+}
+
 #[test]
 fn a_deadlock_is_announced_watched_and_broken() {
     let ip = InteractionParams::default();
     let id = |_| 42;
     let mut n = Negotiation::default();
     let both = [waiting(2.0, 3.0, 0.0, 0.0)];
-    n.update(&both, id, 0.0, 0.0, &ip);
+    n.update(&both, id, &ego(0.0), 0.0, &ip);
     assert_eq!(n.phase, Phase::Waiting);
-    n.update(&both, id, 0.0, 0.4, &ip);
+    n.update(&both, id, &ego(0.0), 0.4, &ip);
     assert_eq!(n.phase, Phase::Waiting);
-    n.update(&both, id, 0.0, ip.deadlock_after_s + 0.01, &ip);
+    n.update(&both, id, &ego(0.0), ip.deadlock_after_s + 0.01, &ip);
     assert_eq!(n.phase, Phase::Announced);
     assert!(n.announces() && !n.yielded(42));
     let announced = ip.deadlock_after_s + 0.01;
-    n.update(&both, id, 0.0, announced + 0.5 * ip.watch_s, &ip);
+    n.update(&both, id, &ego(0.0), announced + 0.5 * ip.watch_s, &ip);
     assert_eq!(n.phase, Phase::Announced);
-    n.update(&both, id, 0.0, announced + ip.watch_s + 0.01, &ip);
+    n.update(&both, id, &ego(0.0), announced + ip.watch_s + 0.01, &ip);
     assert_eq!(n.phase, Phase::Going);
     assert!(n.yielded(42));
     // Once the ego has left the zone, it is over.
-    n.update(&[waiting(-11.0, 3.0, 0.0, 0.0)], id, 5.0, 10.0, &ip);
+    n.update(&[waiting(-11.0, 3.0, 0.0, 0.0)], id, &ego(5.0), 10.0, &ip);
     assert_eq!(n.phase, Phase::Idle);
 }
 
@@ -670,15 +679,107 @@ fn a_deadlock_negotiation_ends_when_the_other_takes_the_way() {
     let id = |_| 42;
     let mut n = Negotiation::default();
     let both = [waiting(2.0, 3.0, 0.0, 0.0)];
-    n.update(&both, id, 0.0, 0.0, &ip);
-    n.update(&both, id, 0.0, 1.0, &ip);
+    n.update(&both, id, &ego(0.0), 0.0, &ip);
+    n.update(&both, id, &ego(0.0), 1.0, &ip);
     assert_eq!(n.phase, Phase::Announced);
     // It moves off after the announcement: the ego gives way again.
-    n.update(&[waiting(2.0, 2.8, 0.3, 1.2)], id, 0.0, 1.2, &ip);
+    n.update(&[waiting(2.0, 2.8, 0.6, 1.2)], id, &ego(0.0), 1.2, &ip);
     assert_eq!(n.phase, Phase::Idle);
     // Only both waiting is a deadlock: an ego still rolling is not waiting.
-    n.update(&both, id, 3.0, 2.0, &ip);
+    n.update(&both, id, &ego(3.0), 2.0, &ip);
     assert_eq!(n.phase, Phase::Idle);
+}
+
+/// The ego waiting 5 m before its zone; another car `d` m before its own at `v` m/s, braking
+/// as one that yields with probability `y`, each with a 15 m passage.
+fn approaching(d: f64, v: f64, y: f64) -> ConflictPair {
+    let mut c = waiting(5.0, d, v, 0.0);
+    c.ego_pass_m = [5.0, 20.0];
+    c.agent_pass_m = [d, d + 15.0];
+    c.intent.yielding = y;
+    c.intent.undecided = 1.0 - y;
+    c
+}
+
+#[test]
+fn a_waiting_ego_asks_a_car_that_can_stop_gently_and_goes_once_it_brakes() {
+    let ip = InteractionParams::default();
+    let id = |_| 7;
+    let mut n = Negotiation::default();
+    // 40 m out at 8 m/s it would stop at 0.89 m/s² after its reaction: gentle enough to ask,
+    // and it would reach the crossing before the ego could have crossed with pet_go_s to spare.
+    n.update(&[approaching(40.0, 8.0, 0.0)], id, &ego(0.0), 0.0, &ip);
+    assert_eq!(n.phase, Phase::Announced);
+    assert!(n.announces() && !n.yielded(7));
+    // Watched for less than watch_s, it has not answered yet.
+    n.update(&[approaching(36.0, 8.0, 0.0)], id, &ego(0.0), 0.5, &ip);
+    assert_eq!(n.phase, Phase::Announced);
+    // It brakes as one that yields: the ego goes.
+    n.update(&[approaching(32.0, 6.5, 0.9)], id, &ego(0.0), 1.1, &ip);
+    assert_eq!(n.phase, Phase::Going);
+    assert!(n.yielded(7));
+    // Braking less near its line is no break-off; speeding up again is.
+    n.update(&[approaching(20.0, 4.0, 0.3)], id, &ego(2.0), 2.0, &ip);
+    assert_eq!(n.phase, Phase::Going);
+    n.update(&[approaching(17.0, 4.6, 0.0)], id, &ego(3.0), 2.5, &ip);
+    assert_eq!(n.phase, Phase::Idle);
+    // It refused: it is not asked again.
+    n.update(&[approaching(40.0, 8.0, 0.0)], id, &ego(0.0), 3.0, &ip);
+    assert_eq!(n.phase, Phase::Idle);
+}
+
+#[test]
+fn a_car_that_keeps_coming_after_the_request_is_let_through_and_not_asked_again() {
+    let ip = InteractionParams::default();
+    let id = |_| 7;
+    let mut n = Negotiation::default();
+    n.update(&[approaching(40.0, 8.0, 0.0)], id, &ego(0.0), 0.0, &ip);
+    assert_eq!(n.phase, Phase::Announced);
+    // After watch_s at its speed it could no longer stop gently: it has answered no.
+    n.update(&[approaching(24.0, 8.0, 0.0)], id, &ego(0.0), 2.0, &ip);
+    assert_eq!(n.phase, Phase::Idle);
+    assert!(!n.announces());
+    n.update(&[approaching(40.0, 8.0, 0.0)], id, &ego(0.0), 2.1, &ip);
+    assert_eq!(n.phase, Phase::Idle);
+}
+
+#[test]
+fn nobody_is_asked_to_brake_hard_or_without_need() {
+    let ip = InteractionParams::default();
+    let ask = |pairs: &[ConflictPair], ip: &InteractionParams, e: EgoState| {
+        let mut n = Negotiation::default();
+        n.update(pairs, |k| k as u32 + 1, &e, 0.0, ip);
+        n.phase
+    };
+    let far = approaching(40.0, 8.0, 0.0);
+    assert_eq!(ask(&[far], &ip, ego(0.0)), Phase::Announced);
+    // 22 m out at 8 m/s it needs 2.0 m/s² after its reaction: not asked, and while it could
+    // still stop that way, no one behind it is asked either.
+    let near = approaching(22.0, 8.0, 0.0);
+    assert_eq!(ask(&[near], &ip, ego(0.0)), Phase::Idle);
+    assert_eq!(ask(&[near, far], &ip, ego(0.0)), Phase::Idle);
+    // One past its point of no return passes first; the one behind it is asked.
+    let mut committed = near;
+    committed.intent.committed = true;
+    assert_eq!(ask(&[committed, far], &ip, ego(0.0)), Phase::Announced);
+    // Far enough for the ego to cross before it with pet_go_s to spare: no need to ask.
+    assert_eq!(
+        ask(&[approaching(90.0, 8.0, 0.0)], &ip, ego(0.0)),
+        Phase::Idle
+    );
+    // An ego still rolling without giving way asks no one; one slowing to give way does.
+    assert_eq!(ask(&[far], &ip, ego(5.0)), Phase::Idle);
+    let slowing = EgoState {
+        gives_way: true,
+        ..ego(5.0)
+    };
+    assert_eq!(ask(&[far], &ip, slowing), Phase::Announced);
+    // request_decel_mps2 = 0: traffic that does not read the eHMI is never asked.
+    let silent = InteractionParams {
+        request_decel_mps2: 0.0,
+        ..ip
+    };
+    assert_eq!(ask(&[far], &silent, ego(0.0)), Phase::Idle);
 }
 
 /// At time `t`, the paper's CAV standing 1.5 m before its stop line, an HDV (id 1) standing 3 m

@@ -1,9 +1,11 @@
 //! A stopped Concord ego moves off once nothing holds it: the paper's left turn at 6 m/s with a
 //! hesitant driver who stops before the junction and waits for a sign, which it does not get:
 //! here it does not see the eHMI (with it, it answers the ego's announcement and the ego never
-//! stops). The ego stops too, announces that it goes first and, once the driver keeps waiting,
-//! counts it as yielding: no conflict holds it back any more, yet the history terms of
-//! eq. 12–14 would keep choosing "decelerate" in the unchanging scene (see `idle_penalty`).
+//! stops). Nor does the ego ask while it slows (`request_decel_mps2 = 0`): asking, it reads the
+//! driver's stop as the answer and never stops either. So the ego stops too, announces that it
+//! goes first and, once the driver keeps waiting, counts it as yielding: no conflict holds it
+//! back any more, yet the history terms of eq. 12–14 would keep choosing "decelerate" in the
+//! unchanging scene (see `idle_penalty`).
 
 use concord_core::Params;
 use concord_sim::controllers::{Advisor, ConcordController, Controller};
@@ -32,9 +34,20 @@ fn replay(params: Params) -> (f64, bool) {
     (stood, false)
 }
 
+/// The defaults, except that the ego never asks before it stands (the deadlock is the point).
+fn not_asking() -> Params {
+    Params {
+        interaction: concord_core::params::InteractionParams {
+            request_decel_mps2: 0.0,
+            ..Params::default().interaction
+        },
+        ..Params::default()
+    }
+}
+
 #[test]
 fn a_stopped_ego_moves_off_once_the_conflict_is_gone() {
-    let (stood, through) = replay(Params::default());
+    let (stood, through) = replay(not_asking());
     // It does stop (the situation this test is about), briefly, and gets through.
     assert!(stood > 0.5, "stood only {stood:.2} s");
     assert!(stood < 4.0, "stood {stood:.2} s");
@@ -44,7 +57,7 @@ fn a_stopped_ego_moves_off_once_the_conflict_is_gone() {
             idle_penalty: 0.0,
             ..Params::default().choice
         },
-        ..Params::default()
+        ..not_asking()
     };
     // Without the idle penalty it stands on long after the driver has stopped for it.
     let (stood, _) = replay(without);
