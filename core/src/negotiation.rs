@@ -71,9 +71,13 @@ fn moving_off(c: &ConflictPair, ip: &InteractionParams) -> bool {
     c.agent_speed_mps >= ip.creep_speed_mps || c.agent_accel_mps2 > MOVING_OFF_MPS2
 }
 
+/// True when a zone `d` m ahead is within [`NEAR_ZONE_M`].
+fn near(d: f64) -> bool {
+    d > 0.0 && d < NEAR_ZONE_M
+}
+
 fn waits(c: &ConflictPair, ip: &InteractionParams) -> bool {
-    let d = c.agent_zone_m[0];
-    d > 0.0 && d < NEAR_ZONE_M && !c.intent.committed && !moving_off(c, ip)
+    near(c.agent_zone_m[0]) && !c.intent.committed && !moving_off(c, ip)
 }
 
 /// True when road user `c` approaches its zone, neither standing nor committed.
@@ -129,11 +133,8 @@ impl Negotiation {
         now: f64,
         ip: &InteractionParams,
     ) {
-        let ego_speed = ego.speed_mps;
-        let ego_waits = |c: &ConflictPair| {
-            let d = c.ego_zone_m[0];
-            ego_speed < ip.creep_speed_mps && d > 0.0 && d < NEAR_ZONE_M
-        };
+        let ego_stands = ego.speed_mps < ip.creep_speed_mps;
+        let ego_waits = |c: &ConflictPair| ego_stands && near(c.ego_zone_m[0]);
         let partner = conflicts
             .iter()
             .filter(|c| ego_waits(c) && waits(c, ip))
@@ -181,8 +182,7 @@ impl Negotiation {
                 Some(c)
                     if c.ego_zone_m[0] > 0.0
                         && (takes_way(c, self.lowest_mps)
-                            || (ego_speed < ip.creep_speed_mps
-                                && elapsed >= ip.deadlock_wait_s)) =>
+                            || (ego_stands && elapsed >= ip.deadlock_wait_s)) =>
                 {
                     self.refuse();
                     None
@@ -192,7 +192,8 @@ impl Negotiation {
         };
         match next {
             Some((phase, id)) => {
-                if id != self.agent_id || self.phase != Phase::Announced {
+                // Going keeps the lowest speed watched since the announcement.
+                if phase != Phase::Going {
                     self.lowest_mps = conflicts
                         .iter()
                         .find(|c| id_of(c.agent) == id)
@@ -225,10 +226,7 @@ impl Negotiation {
         ego: &EgoState,
         ip: &InteractionParams,
     ) -> Option<(Phase, u32)> {
-        let ego_asks = |c: &ConflictPair| {
-            let d = c.ego_zone_m[0];
-            (ego.speed_mps < ip.creep_speed_mps || ego.gives_way) && d > 0.0 && d < NEAR_ZONE_M
-        };
+        let ego_asks = ego.speed_mps < ip.creep_speed_mps || ego.gives_way;
         let gentle = |c: &ConflictPair| stop_decel(c, ip) <= ip.request_decel_mps2;
         if conflicts
             .iter()
@@ -241,18 +239,16 @@ impl Negotiation {
         conflicts
             .iter()
             .filter(|c| {
-                ego_asks(c)
+                ego_asks
+                    && near(c.ego_zone_m[0])
                     && approaches(c, ip)
                     && gentle(c)
                     && !self.refused.contains(&Some(id_of(c.agent)))
-                    && proceeding_interval(c, ip).0 < ego_exit(c) + ip.pet_go_s
             })
-            .min_by(|a, b| {
-                proceeding_interval(a, ip)
-                    .0
-                    .total_cmp(&proceeding_interval(b, ip).0)
-            })
-            .map(|c| (Phase::Announced, id_of(c.agent)))
+            .map(|c| (proceeding_interval(c, ip).0, c))
+            .filter(|&(enters, c)| enters < ego_exit(c) + ip.pet_go_s)
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, c)| (Phase::Announced, id_of(c.agent)))
     }
 
     /// True when the ego announces that it goes first.

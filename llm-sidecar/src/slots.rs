@@ -73,25 +73,37 @@ mod tests {
     use std::sync::Arc;
     use std::time::Duration;
 
+    type Order = Arc<std::sync::Mutex<Vec<&'static str>>>;
+
+    /// A call `name` (advice when `urgent`) that waits for a slot until `deadline`, records its
+    /// turn in `order` and holds the slot for 10 ms.
+    fn contender(
+        slots: &Arc<Slots>,
+        order: &Order,
+        deadline: Instant,
+        name: &'static str,
+        urgent: bool,
+    ) -> tokio::task::JoinHandle<()> {
+        let (slots, order) = (slots.clone(), order.clone());
+        tokio::spawn(async move {
+            let p = if urgent {
+                slots.urgent(deadline).await
+            } else {
+                slots.routine(deadline).await
+            };
+            assert!(p.is_some(), "{name} got no slot");
+            order.lock().unwrap().push(name);
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        })
+    }
+
     #[tokio::test(start_paused = true)]
     async fn advice_waiting_goes_before_routine_calls_queued_earlier() {
         let slots = Arc::new(Slots::new(1));
         let far = Instant::now() + Duration::from_secs(60);
         let order = Arc::new(std::sync::Mutex::new(Vec::new()));
         let held = slots.routine(far).await.unwrap();
-        let spawn = |name: &'static str, urgent: bool| {
-            let (slots, order) = (slots.clone(), order.clone());
-            tokio::spawn(async move {
-                let p = if urgent {
-                    slots.urgent(far).await
-                } else {
-                    slots.routine(far).await
-                };
-                assert!(p.is_some(), "{name} got no slot");
-                order.lock().unwrap().push(name);
-                tokio::time::sleep(Duration::from_millis(10)).await;
-            })
-        };
+        let spawn = |name, urgent| contender(&slots, &order, far, name, urgent);
         let routine = spawn("routine", false);
         tokio::time::sleep(Duration::from_millis(1)).await;
         let advice = spawn("advice", true);
@@ -108,19 +120,7 @@ mod tests {
         let far = Instant::now() + Duration::from_secs(60);
         let order = Arc::new(std::sync::Mutex::new(Vec::new()));
         let held = slots.urgent(far).await.unwrap();
-        let spawn = |name: &'static str, urgent: bool| {
-            let (slots, order) = (slots.clone(), order.clone());
-            tokio::spawn(async move {
-                let p = if urgent {
-                    slots.urgent(far).await
-                } else {
-                    slots.routine(far).await
-                };
-                assert!(p.is_some(), "{name} got no slot");
-                order.lock().unwrap().push(name);
-                tokio::time::sleep(Duration::from_millis(10)).await;
-            })
-        };
+        let spawn = |name, urgent| contender(&slots, &order, far, name, urgent);
         let first = spawn("advice 1", true);
         tokio::time::sleep(Duration::from_millis(1)).await;
         let routine = spawn("routine", false);
