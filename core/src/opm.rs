@@ -269,7 +269,7 @@ pub fn build(
                     agent_dist_m: d_a,
                     ego_ttc_s: te,
                     agent_ttc_s: ta,
-                    delta_ttc_s: (te - ta).abs(),
+                    delta_ttc_s: delta_ttc(d_e, ego_speed, d_a, process.speed_mps, p),
                     ego_point_s: cp.s_a,
                     kind: cp.kind,
                     ego_zone_m: ego_zone,

@@ -614,6 +614,26 @@ impl Lane {
         self.kappa[i].max(self.kappa[i + 1])
     }
 
+    /// Largest reference curvature over arc lengths [`s_lo`, `s_hi`], 1/m, searched from the
+    /// segment `hint`, and the side its centre is on: +1 left (l > 0), −1 right, 0 when the
+    /// lane bends both ways there.
+    pub fn curvature_within(&self, s_lo: f64, s_hi: f64, hint: usize) -> (f64, f64) {
+        let first = self.segment_at(s_lo, hint);
+        let last = self.segment_at(s_hi, first);
+        let (mut kappa, mut left, mut right) = (0.0f64, false, false);
+        for i in first..=last {
+            kappa = kappa.max(self.kappa[i].max(self.kappa[i + 1]));
+            left |= self.segment_turn[i] > 1e-9;
+            right |= self.segment_turn[i] < -1e-9;
+        }
+        let side = match (left, right) {
+            (true, false) => 1.0,
+            (false, true) => -1.0,
+            _ => 0.0,
+        };
+        (kappa, side)
+    }
+
     /// Projects `p` onto segments `first..last` (exclusive) of the reference line.
     pub fn project_range(&self, p: Vec2, first: usize, last: usize) -> Frenet {
         let last = last.min(self.n - 1).max(first + 1);

@@ -23,6 +23,7 @@ use crate::scene::{AgentState, Lane, Morphology, ProcessState, Vec2, MAX_AGENTS,
 pub const MAX_SAMPLES: usize = 1024;
 /// Most time steps of the horizon.
 pub const MAX_STEPS: usize = 64;
+
 /// Trajectory points: t = 0 and every step.
 pub const MAX_POINTS: usize = MAX_STEPS + 1;
 /// Occupancy boxes per time step; on overflow boxes are merged conservatively.
@@ -174,17 +175,106 @@ pub enum Hit {
 }
 
 /// The other road user's predicted footprint behind an occupancy box: centre, heading
-/// (cos, sin), the clearance added around its rectangle and the growth of its length with
-/// the prediction time, m; `exact` when the box is the Minkowski sum of the two rectangles
-/// with that clearance (no narrow phase needed).
+/// (cos, sin) and the growth of its length with the prediction time, m; `exact` when the box
+/// is the Minkowski sum of the two rectangles with the clearance (no narrow phase needed).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Footprint {
     pub centre: Vec2,
     pub cos: f64,
     pub sin: f64,
-    pub clearance: f64,
     pub grown: f64,
     pub exact: bool,
+}
+
+/// Where the lane bends, the part of the ego lane's frame, [s_lo, s_hi, l_lo, l_hi] (m, about
+/// the other road user's foot point (`s`, `l`)), of the ego centres whose rectangle (half
+/// extents `ego`, along and across its lane) can meet another road user's (half extents
+/// `tangential` and `radial` to the lane at its foot point, clearance included), for egos at
+/// most `l_ego` m off the lane; `None` where none can. The lane bends at up to `kappa` 1/m
+/// towards `side` (+1 left, −1 right, 0 both ways). On an arc of radius ρ = 1/κ about O, a
+/// rectangle centred at radius r lies within its radial half extent of r inwards, within
+/// √((r + radial)² + tangential²) outwards and within atan(tangential / (r − radial)) of its
+/// own angle about O; two can meet only where those rings and sectors overlap, which bounds
+/// the ego's l (by its radius) and its s (ρ times the angle). 0.25 m more for the polyline
+/// and the tabulated frame.
+#[allow(clippy::too_many_arguments)]
+fn curved_reach(
+    (s, l): (f64, f64),
+    ego: (f64, f64),
+    tangential: f64,
+    radial: f64,
+    kappa: f64,
+    side: f64,
+    l_ego: f64,
+) -> Option<[f64; 4]> {
+    const SLACK_M: f64 = 0.25;
+    let (hl, hw) = ego;
+    let straight = [
+        s - hl - tangential - SLACK_M,
+        s + hl + tangential + SLACK_M,
+        l - hw - radial - SLACK_M,
+        l + hw + radial + SLACK_M,
+    ];
+    if kappa < 1e-9 {
+        return Some(straight);
+    }
+    let rho = 1.0 / kappa;
+    let half_circle = core::f64::consts::PI * rho;
+    // The nearest the ego's rectangle comes to O.
+    let ego_in = rho - l_ego - hw;
+    if side == 0.0 || ego_in < 0.5 {
+        // Bends both ways, or so sharply that the ego can reach the centre: half the circle
+        // along, and across both rectangles' diagonals.
+        let d = sqrt(hl * hl + hw * hw) + sqrt(tangential * tangential + radial * radial);
+        return Some([
+            s - half_circle,
+            s + half_circle,
+            l - d - SLACK_M,
+            l + d + SLACK_M,
+        ]);
+    }
+    // Radii about O of the other's centre and of its nearest and furthest points.
+    let r = rho - side * l;
+    let (near, far) = (
+        (r - radial).max(0.0),
+        sqrt((r + radial) * (r + radial) + tangential * tangential),
+    );
+    // The ego's centre radii whose rectangle spans part of [near, far]: its inner edge is at
+    // most `far`, its outer corners at least `near`.
+    let r_hi = far + hw;
+    let r_lo = if near > hl {
+        sqrt(near * near - hl * hl) - hw
+    } else {
+        0.0
+    };
+    let (r_lo, r_hi) = (r_lo.max(rho - l_ego), r_hi.min(rho + l_ego));
+    if r_lo > r_hi {
+        return None;
+    }
+    // The other's points the ego can touch are at least `touch` from O: within
+    // asin(diagonal / touch) of the other's own angle, as well as within its own sector.
+    let touch = (r_lo - hw).max(1e-3);
+    let diagonal = sqrt(tangential * tangential + radial * radial);
+    let sector = if near > 0.3 {
+        libm::atan(tangential / near)
+    } else {
+        core::f64::consts::PI
+    };
+    let reachable = if diagonal < touch {
+        libm::asin(diagonal / touch)
+    } else {
+        core::f64::consts::PI
+    };
+    let angle = libm::atan(hl / touch) + sector.min(reachable);
+    let along = (rho * angle).min(half_circle) + SLACK_M;
+    // l = side × (ρ − radius).
+    let (l_a, l_b) = (side * (rho - r_hi), side * (rho - r_lo));
+    Some([
+        (s - along).min(straight[0]),
+        (s + along).max(straight[1]),
+        (l_a.min(l_b) - SLACK_M).min(straight[2]),
+        (l_a.max(l_b) + SLACK_M).max(straight[3]),
+    ])
 }
 
 /// Poses of the ego lane's reference line over the planning window, tabulated so that the
@@ -288,6 +378,8 @@ pub struct Occupancy {
     frame: LaneFrame,
     /// Half length and half width of the ego and of the others' rectangles, m.
     half: (f64, f64),
+    /// The clearance added around the others' rectangles, m.
+    clearance: f64,
 }
 
 impl Default for Occupancy {
@@ -305,6 +397,7 @@ impl Default for Occupancy {
             steps: 0,
             frame: LaneFrame::default(),
             half: (2.4, 1.0),
+            clearance: 0.0,
         }
     }
 }
@@ -318,11 +411,12 @@ impl Occupancy {
     }
 
     /// Adds a box at `step` (`margin`: a post-encroachment margin, not a footprint; `footprint`:
-    /// the one road user's rectangle behind a footprint box). A box inside another that blocks
-    /// at least as much is dropped (a footprint box that covers another footprint's loses its
-    /// rectangle and blocks all of itself); when the step is full, it is merged into the box
-    /// whose area grows least, one of its own kind if there is one (a footprint merged with a
-    /// margin stays a footprint; a merged box loses its rectangle).
+    /// the one road user's rectangle behind a footprint box; where it is not exact, the box is
+    /// where the rectangles are tested). A box inside another that blocks at least as much is
+    /// dropped (a footprint box that covers another footprint's loses its rectangle and blocks
+    /// all of itself; one whose rectangle decides covers nothing); when the step is full, it is
+    /// merged into the box whose area grows least, one of its own kind if there is one (a
+    /// footprint merged with a margin stays a footprint; a merged box loses its rectangle).
     #[allow(clippy::too_many_arguments)]
     fn add(
         &mut self,
@@ -335,8 +429,12 @@ impl Occupancy {
         footprint: Option<Footprint>,
     ) {
         let k = self.n[step] as usize;
+        // A box whose rectangles decide does not block all of itself: it covers only its own
+        // footprint again.
         let covering = (0..k).find(|&b| {
             (margin || !self.margin[step][b])
+                && (self.footprint[step][b].is_none_or(|f| f.exact)
+                    || (!margin && self.footprint[step][b] == footprint))
                 && self.s_lo[step][b] <= s_lo
                 && self.s_hi[step][b] >= s_hi
                 && self.l_lo[step][b] <= l_lo
@@ -409,7 +507,7 @@ impl Occupancy {
             };
             let (centre, c, s_) = *ego.get_or_insert_with(|| self.frame.pose(s, l));
             let (hl, hw) = self.half;
-            let other = (hl + f.grown + f.clearance, hw + f.clearance);
+            let other = (hl + f.grown + self.clearance, hw + self.clearance);
             if rectangles_overlap(centre, (c, s_), (hl, hw), f.centre, (f.cos, f.sin), other) {
                 return Hit::Contact;
             }
@@ -835,7 +933,10 @@ impl Planner {
             Vec2::new(max.x + inflate, max.y + inflate),
         );
         let lateral_reach = lane.half_width + p.max_lateral_offset_m;
+        // How far off the lane the ego's centre can be.
+        let ego_reach = self.lateral_bound(p);
         self.occupancy.half = (half_l, half_w);
+        self.occupancy.clearance = p.safety_margin_m;
         self.occupancy.frame.fill(
             lane,
             s0 - p.vehicle_length_m,
@@ -911,9 +1012,6 @@ impl Planner {
                 let margin = p.safety_margin_m;
                 let ext_s = half_l + c * other_l + s * other_w + margin;
                 let ext_l = half_w + s * other_l + c * other_w + margin;
-                if fabs(fr.l) > lateral_reach + ext_l {
-                    continue;
-                }
                 let b = [fr.s - ext_s, fr.s + ext_s, fr.l - ext_l, fr.l + ext_l];
                 // The box is the exact Minkowski sum of the two rectangles where the lane is
                 // straight across it and the headings are parallel or perpendicular;
@@ -922,13 +1020,38 @@ impl Planner {
                 let curved = [b[0], fr.s, b[1]]
                     .iter()
                     .any(|&q| lane.curvature_at(q, fr.segment) * bent > FRAME_EXACT_TOLERANCE);
+                let exact = !curved && c * s <= FRAME_EXACT_TOLERANCE;
+                let b = if exact {
+                    b
+                } else {
+                    // The other's extents along and across the lane, with the clearance.
+                    let (ol, ow) = (other_l + margin, other_w + margin);
+                    let (tangential, radial) = (c * ol + s * ow, s * ol + c * ow);
+                    let near = tangential + half_l + 2.0;
+                    let (kappa, side) = lane.curvature_within(fr.s - near, fr.s + near, fr.segment);
+                    let reach = curved_reach(
+                        (fr.s, fr.l),
+                        (half_l, half_w),
+                        tangential,
+                        radial,
+                        kappa,
+                        side,
+                        ego_reach,
+                    );
+                    match reach {
+                        Some(r) => r,
+                        None => continue,
+                    }
+                };
+                if b[2] > ego_reach || b[3] < -ego_reach {
+                    continue;
+                }
                 let footprint = Footprint {
                     centre: pos,
                     cos: cos(heading),
                     sin: sin(heading),
-                    clearance: margin,
                     grown,
-                    exact: !curved && c * s <= FRAME_EXACT_TOLERANCE,
+                    exact,
                 };
                 self.occupancy
                     .add(step, b[0], b[1], b[2], b[3], false, Some(footprint));
@@ -1152,16 +1275,7 @@ impl Planner {
         // without it, near the bound, every candidate fails and the ego brakes hard where
         // nothing is in its way.
         let lateral_moves = l.c[1..].iter().any(|c| *c != 0.0);
-        let outward = if st.l * st.dl >= 0.0 {
-            fabs(st.dl)
-        } else {
-            0.0
-        };
-        let quickest = p.min_duration_s.max(6.0 * sqrt(outward / p.max_jerk_mps3));
-        let l_bound = p
-            .max_lateral_offset_m
-            .max(fabs(st.l) + OVERSHOOT_PER_UT * outward * quickest)
-            + 1e-6;
+        let l_bound = self.lateral_bound(p);
         let goal = st.s + self.goal_distance;
         let mut t_goal = f64::NAN;
         let (mut prev_t, mut prev_s) = (0.0, st.s);
@@ -1259,6 +1373,21 @@ impl Planner {
             duration: t_end,
             score,
         })
+    }
+
+    /// The largest offset from the lane, m, that a candidate's lateral path may reach (see
+    /// `evaluate_with`).
+    fn lateral_bound(&self, p: &TrajectoryParams) -> f64 {
+        let st = &self.start;
+        let outward = if st.l * st.dl >= 0.0 {
+            fabs(st.dl)
+        } else {
+            0.0
+        };
+        let quickest = p.min_duration_s.max(6.0 * sqrt(outward / p.max_jerk_mps3));
+        p.max_lateral_offset_m
+            .max(fabs(st.l) + OVERSHOOT_PER_UT * outward * quickest)
+            + 1e-6
     }
 
     /// Analytic limit checks over [0, T]; returns ∫|s⃛| dt, ∫|l⃛| dt and the peak speed.
@@ -1493,7 +1622,7 @@ pub enum Reject {
 
 #[cfg(test)]
 mod tests {
-    use super::{Footprint, FrenetState, Hit, Occupancy, Planner, VCAP_BINS};
+    use super::{Footprint, FrenetState, Hit, LaneFrame, Occupancy, Planner, VCAP_BINS};
     use crate::choice::Profile;
     use crate::params::Params;
     use crate::scene::{Lane, Turn, Vec2};
@@ -1557,7 +1686,9 @@ mod tests {
         // A car's 10 × 8 m box with its 4.8 × 2 m rectangle at (5, 0), then a margin within
         // the box and the same footprint again: the ego 3.5 m to the side of the car is inside
         // the box but clear of the rectangle, so it still meets nothing (had either addition
-        // stripped the box of its rectangle, all of the box would block).
+        // stripped the box of its rectangle, all of the box would block). The margin is kept
+        // beside it (the box blocks only where the rectangles meet), the same footprint is
+        // not stored twice.
         let mut occ = Occupancy::default();
         for (k, x) in occ.frame.x.iter_mut().enumerate() {
             *x = k as f64;
@@ -1566,7 +1697,6 @@ mod tests {
             centre: Vec2::new(5.0, 0.0),
             cos: 1.0,
             sin: 0.0,
-            clearance: 0.0,
             grown: 0.0,
             exact: false,
         };
@@ -1575,7 +1705,8 @@ mod tests {
         assert_eq!(occ.hit(0, 5.0, 1.5), Hit::Contact);
         occ.add(0, 1.0, 9.0, -1.0, 1.0, true, None);
         occ.add(0, 0.0, 10.0, -4.0, 4.0, false, Some(car));
-        assert_eq!(occ.boxes(0).count(), 1);
+        assert_eq!(occ.boxes(0).count(), 2);
+        assert_eq!(occ.hit(0, 5.0, 0.5), Hit::Contact);
         assert_eq!(occ.hit(0, 5.0, 3.5), Hit::Free);
     }
 
@@ -1617,6 +1748,108 @@ mod tests {
             checked += 1;
         }
         assert!(checked > 40, "{checked} vertices");
+    }
+
+    #[test]
+    fn each_curve_cap_is_that_of_the_segments_its_bin_touches_and_no_other() {
+        // Integer-length segments (10 m straights, 3-4-5 diagonals) and 0.25 m bins: vertices
+        // fall exactly on bin edges. A bin [lo, hi) is capped by every segment that reaches
+        // into it (also one ending at lo), and not by the one starting at hi.
+        let p = Params::default().trajectory;
+        let mut b = Lane::builder(Vec2::new(0.0, 0.0));
+        let mut at = Vec2::new(0.0, 0.0);
+        for _ in 0..3 {
+            for d in [(10.0, 0.0), (3.0, 4.0), (0.0, 5.0), (3.0, 4.0)] {
+                at = Vec2::new(at.x + d.0, at.y + d.1);
+                b = b.line_to(at);
+            }
+        }
+        let lane = b.build(1.75, 0.0, Turn::Left).expect("a lane");
+        let reach = 0.25 * VCAP_BINS as f64;
+        assert!(lane.length() > reach + 1.0);
+        let cap = |kappa: f64| {
+            if kappa > p.max_curvature {
+                0.0
+            } else if kappa > 1e-9 {
+                libm::sqrt(p.max_lateral_accel_mps2 / kappa).min(p.max_speed_mps)
+            } else {
+                p.max_speed_mps
+            }
+        };
+        let mut planner = Planner::default();
+        planner.fill_vcap(&lane, 0.0, reach, &p);
+        let mut differ = 0;
+        for bin in 0..VCAP_BINS {
+            let (lo, hi) = (0.25 * bin as f64, 0.25 * (bin + 1) as f64);
+            let kappa = (0..lane.segments())
+                .filter(|&i| lane.s_at_vertex(i) < hi && lane.s_at_vertex(i + 1) >= lo)
+                .map(|i| lane.curvature_at(lane.s_at_vertex(i), i))
+                .fold(0.0, f64::max);
+            assert_eq!(planner.vcap[bin], cap(kappa), "bin {bin}: [{lo}, {hi})");
+            let next = (0..lane.segments()).find(|&i| lane.s_at_vertex(i) == hi);
+            differ +=
+                usize::from(next.is_some_and(|i| lane.curvature_at(hi, i + 1) > kappa + 1e-9));
+        }
+        assert!(
+            differ >= 3,
+            "{differ} bins end where a sharper segment starts"
+        );
+    }
+
+    #[test]
+    fn an_ego_above_the_top_speed_may_slow_gently_before_the_curve_caps_it() {
+        // 22 m/s on a straight 120 m before a 10 m turn (capped at √(4 / 0.1) = 6.3 m/s),
+        // above the top speed of 20 m/s: easing to 20 m/s over 4 s stays short of the turn
+        // within the 5 s horizon, so no curve cap applies and the plan stands (the straight's
+        // caps are the top speed, which the start may exceed).
+        let p = Params::default().trajectory;
+        let lane = Lane::builder(Vec2::new(0.0, 0.0))
+            .line_to(Vec2::new(120.0, 0.0))
+            .arc(Vec2::new(120.0, 10.0), core::f64::consts::FRAC_PI_2, 1.0)
+            .line_to(Vec2::new(130.0, 40.0))
+            .build(1.75, 0.0, Turn::Left)
+            .expect("a lane");
+        let mut planner = Planner {
+            start: FrenetState {
+                ds: 22.0,
+                ..FrenetState::default()
+            },
+            steps: 50,
+            dt: 0.1,
+            ..Planner::default()
+        };
+        planner.fill_vcap(&lane, 0.0, 150.0, &p);
+        assert!(planner.vcap_min < 7.0 && planner.vcap_from_s > 110.0);
+        let eased = planner.evaluate(4.0, 20.0, 0.0, &p);
+        assert!(eased.is_ok(), "{eased:?}");
+    }
+
+    #[test]
+    fn the_lane_frame_gives_the_lanes_own_pose_with_a_unit_heading() {
+        // A 20 m radius quarter turn: the interpolated frame matches the lane's own Frenet
+        // conversion within a bin's chord error, and its heading is a unit vector.
+        let lane = Lane::builder(Vec2::new(-10.0, 0.0))
+            .line_to(Vec2::new(0.0, 0.0))
+            .arc(Vec2::new(0.0, 20.0), core::f64::consts::FRAC_PI_2, 1.0)
+            .line_to(Vec2::new(20.0, 40.0))
+            .build(1.75, 0.0, Turn::Left)
+            .expect("a lane");
+        let mut frame = LaneFrame::default();
+        frame.fill(&lane, 5.0, 45.0);
+        for i in 0..=80 {
+            let s = 5.0 + 0.5 * i as f64;
+            for l in [-2.0, 0.0, 1.5] {
+                let (q, c, sn) = frame.pose(s, l);
+                let (want, tangent, _) = lane.to_cartesian(s, l, 0);
+                assert!((c * c + sn * sn - 1.0).abs() < 1e-9, "({s}, {l}): |h| ≠ 1");
+                assert!(q.minus(want).norm() < 0.02, "({s}, {l}): {q:?} vs {want:?}");
+                let turn = libm::atan2(sn, c) - tangent;
+                assert!(
+                    libm::sin(turn).abs() < 0.01,
+                    "({s}, {l}): heading off by {turn}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -73,7 +73,10 @@ fn frenet_projection_round_trips_on_the_turn() {
 #[test]
 fn eq4_delta_ttc_with_its_standstill_guard() {
     let p = OpmParams::default();
+    // |30/10 − 20/5| = 1 s, and in either order; |30/10 − 10/4| = 0.5 s.
     assert!((delta_ttc(30.0, 10.0, 20.0, 5.0, &p) - 1.0).abs() < EPS);
+    assert!((delta_ttc(20.0, 5.0, 30.0, 10.0, &p) - 1.0).abs() < EPS);
+    assert!((delta_ttc(30.0, 10.0, 10.0, 4.0, &p) - 0.5).abs() < EPS);
     // v below the floor uses the floor: 10 m / 0.5 m/s = 20 s.
     assert!((guarded_ttc(10.0, 0.0, &p) - 20.0).abs() < EPS);
     // Capped at ttc_max, and never negative.
@@ -1088,6 +1091,33 @@ fn a_car_ahead_in_the_lane_corridor_is_the_leader_also_off_centre() {
 }
 
 #[test]
+fn the_leader_is_the_nearest_car_ahead_in_any_order_and_never_one_behind() {
+    // On the ego's lane (heading −x at y = 5): 12 m ahead, 22 m ahead and 10 m behind, pushed
+    // in every order. The leader is the one 12 m ahead.
+    let at = [28.0, 18.0, 50.0];
+    for order in [[0, 1, 2], [1, 0, 2], [2, 1, 0], [1, 2, 0]] {
+        let mut core = paper_core(Params::default());
+        let mut scene = paper_scene(0.0, 8.0, 8.0);
+        for (k, &i) in order.iter().enumerate() {
+            let pos = Vec2::new(at[i], 5.0);
+            scene.push(AgentState::moving(
+                2 + k as u32,
+                pos,
+                core::f64::consts::PI,
+                8.0,
+            ));
+        }
+        core.step(&scene, 0.0, None).unwrap();
+        let leader = core.triplet().leader.expect("a car ahead leads");
+        assert!(
+            (leader.gap_m - 12.0).abs() < 0.5,
+            "{order:?}: gap {}",
+            leader.gap_m
+        );
+    }
+}
+
+#[test]
 fn decelerate_stops_at_the_yield_point_braking_at_v0_squared_over_2d() {
     // 10 m/s, 20 m to the yield point: faster than the approach speed 2(√21 − 1) m/s, so one
     // stopping polynomial: −v0²/(2d) = −2.5 m/s² over T = 2d/v0 = 4 s.
@@ -1320,17 +1350,17 @@ fn empty_road_planner(s: f64, v: f64) -> (Planner, Morphology) {
 
 #[test]
 fn a_footprint_overlapping_another_is_kept_and_a_point_in_it_is_a_contact() {
-    // Two standing cars in the ego's lane, 30 and 27 m ahead: the second's box reaches 3 m
-    // further back than the first's and is not inside it, so both block; a point in either
-    // is a contact (a footprint, not a margin).
+    // Two standing cars in the ego's lane, 22 and 19 m ahead, on the straight before the
+    // turn: the second's box reaches 3 m further back than the first's and is not inside it,
+    // so both block; a point in either is a contact (a footprint, not a margin).
     let car = |ahead: f64| car_on_the_turn(ahead, 0.0);
-    let (planner, _) = planner_with(&[car(30.0), car(27.0)], 0.0, 5.0, 0.0);
+    let (planner, _) = planner_with(&[car(22.0), car(19.0)], 0.0, 5.0, 0.0);
     let boxes: Vec<_> = planner.occupancy.boxes(0).collect();
     assert_eq!(boxes.len(), 2, "{boxes:?}");
     let back = boxes.iter().map(|b| b.0).fold(f64::INFINITY, f64::min);
-    assert!(back < 27.0 - 2.25, "{boxes:?}");
+    assert!(back < 19.0 - 2.25, "{boxes:?}");
     assert_eq!(planner.occupancy.hit(0, back + 0.1, 0.0), Hit::Contact);
-    assert_eq!(planner.occupancy.hit(0, 28.5, 0.0), Hit::Contact);
+    assert_eq!(planner.occupancy.hit(0, 20.5, 0.0), Hit::Contact);
     assert_eq!(planner.occupancy.hit(0, 10.0, 0.0), Hit::Free);
     // Each box is the Minkowski sum of two cars aligned with the lane, with the clearance,
     // the other's length grown for the first step (t = dt): half-extents length + clearance +
@@ -1621,6 +1651,105 @@ fn a_follower_in_the_egos_lane_puts_no_box_in_its_way_but_a_car_ahead_does() {
     assert!((0..50).all(|step| behind.occupancy.boxes(step).next().is_none()));
     let (ahead, _) = planner_with(&[car(30.0)], 10.0, 8.0, 0.0);
     assert!(ahead.occupancy.boxes(0).next().is_some());
+}
+
+/// True when rectangles centred at `a` and `b` with headings `ha`, `hb` (rad) and half
+/// extents (length, width) overlap: the separating-axis test, written out independently.
+fn rectangles_meet(a: Vec2, ha: f64, ea: (f64, f64), b: Vec2, hb: f64, eb: (f64, f64)) -> bool {
+    let corners = |c: Vec2, h: f64, (hl, hw): (f64, f64)| {
+        let (u, n) = (
+            Vec2::from_angle(h),
+            Vec2::from_angle(h + std::f64::consts::FRAC_PI_2),
+        );
+        [(1.0, 1.0), (1.0, -1.0), (-1.0, -1.0), (-1.0, 1.0)]
+            .map(|(i, j)| c.plus(u.scale(i * hl)).plus(n.scale(j * hw)))
+    };
+    let (pa, pb) = (corners(a, ha, ea), corners(b, hb, eb));
+    let axes = [
+        ha,
+        ha + std::f64::consts::FRAC_PI_2,
+        hb,
+        hb + std::f64::consts::FRAC_PI_2,
+    ];
+    axes.iter().all(|&h| {
+        let axis = Vec2::from_angle(h);
+        let span = |pts: &[Vec2; 4]| {
+            let d = pts.map(|q| q.dot(axis));
+            (
+                d.iter().cloned().fold(f64::INFINITY, f64::min),
+                d.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
+            )
+        };
+        let ((a_lo, a_hi), (b_lo, b_hi)) = (span(&pa), span(&pb));
+        a_lo <= b_hi && b_lo <= a_hi
+    })
+}
+
+#[test]
+fn a_standing_car_blocks_exactly_where_the_egos_rectangle_would_meet_its_own() {
+    // A standing car before, in and after the paper's left turn (a 10 m arc) and right turn
+    // (5 m), on the centre line and up to 7 m to either side, at five headings to the lane:
+    // at every point of a 0.2 m grid around it, the ego's reference point is in contact where
+    // the ego's rectangle there meets the car's with its clearance and first-step growth (by
+    // more than 6 cm), and free where they stay more than 6 cm apart, whether the core tests
+    // the car's box alone (where the box is exact) or its rectangle (where the lane bends, a
+    // box in the lane's frame is not the Minkowski sum, and the rectangles' reach is). 6 cm:
+    // the planner's tabulated frame places the ego up to 5 cm from the lane's own conversion
+    // 3 m inside the 5 m arc. The ego may plan up to 3 m off its lane here.
+    let p = TrajectoryParams {
+        max_lateral_offset_m: 3.0,
+        ..Params::default().trajectory
+    };
+    let morph = BuiltIn::PaperIntersection.morphology();
+    let (hl, hw) = (0.5 * p.vehicle_length_m, 0.5 * p.vehicle_width_m);
+    let clear = p.safety_margin_m;
+    let other = (hl + p.margin_growth_mps * p.dt_s + clear, hw + clear);
+    let grow = |d: f64| (other.0 + d, other.1 + d);
+    let mut checked = [0usize; 2];
+    // Each lane with arc lengths before, in and after its turn.
+    for (id, cars) in [
+        (paper::CAV_LEFT, [30.0, 38.0, 43.0, 48.0, 53.0]),
+        (paper::WEST_RIGHT, [32.0, 36.0, 39.0, 42.0, 45.0]),
+    ] {
+        let lane = morph.lane(id);
+        let start = FrenetState {
+            s: 20.0,
+            ..FrenetState::default()
+        };
+        for s_car in cars {
+            for l_car in [-7.0, -4.5, -2.0, 0.0, 2.0, 4.5, 7.0] {
+                for turn in [0.0, 0.3, 0.79, 1.2, 1.57] {
+                    let (pos, tangent, _) = lane.to_cartesian(s_car, l_car, 0);
+                    let h_car = tangent + turn;
+                    let car = AgentState::moving(1, pos, h_car, 0.0);
+                    let mut planner = Planner::default();
+                    let none = [ProcessState::default(); MAX_AGENTS];
+                    let straight_on = [Forecast::default(); MAX_AGENTS];
+                    planner.prepare(id, start, 100.0, &[car], &none, &straight_on, &morph, &p);
+                    for i in 0..=80 {
+                        for j in 0..=30 {
+                            let (s, l) = (s_car - 8.0 + 0.2 * i as f64, -3.0 + 0.2 * j as f64);
+                            let (ego, h, _) = lane.to_cartesian(s, l, 0);
+                            let meets = rectangles_meet(ego, h, (hl, hw), pos, h_car, grow(-0.06));
+                            let near = rectangles_meet(ego, h, (hl, hw), pos, h_car, grow(0.06));
+                            let hit = planner.occupancy.hit(0, s, l);
+                            let at = || {
+                                format!("lane {id}: car at ({s_car}, {l_car}) turned {turn}, ego at ({s:.1}, {l:.1})")
+                            };
+                            if meets {
+                                assert_eq!(hit, Hit::Contact, "{}", at());
+                                checked[0] += 1;
+                            } else if !near {
+                                assert_ne!(hit, Hit::Contact, "{}", at());
+                                checked[1] += 1;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(checked[0] > 10_000 && checked[1] > 10_000, "{checked:?}");
 }
 
 /// The request log holds requests, not cycles: ids between two requests are unknown, and a

@@ -306,6 +306,12 @@ fn courtesy_refuses_a_plan_that_makes_the_other_brake_hard() {
         ),
         0.0
     );
+    // A car that stands is imposed nothing, also one standing 1 m into its passage, in front
+    // of which the ego would go first (its risk is the collision check's).
+    for pass in [[15.0, 25.0], [-1.0, 9.0]] {
+        let b = imposed_decel(&keep(10.0), 10.0, &pair([0.0, 10.0], pass, 0.0), 0.0, &ip);
+        assert_eq!(b, 0.0, "standing, passage {pass:?}");
+    }
     // In the choice: the ego about to cross, the other 12 m before its passage at 10 m/s and
     // undecided (counted as letting the ego go first with probability 0.5): going first is
     // refused, and counted; yielding is not.
