@@ -27,7 +27,7 @@ pub const MAX_STEPS: usize = 64;
 /// Trajectory points: t = 0 and every step.
 pub const MAX_POINTS: usize = MAX_STEPS + 1;
 /// Occupancy boxes per time step; on overflow boxes are merged conservatively.
-pub const MAX_BOXES: usize = 16;
+pub const MAX_BOXES: usize = 32;
 /// Bins of the curvature speed-cap table.
 pub const VCAP_BINS: usize = 256;
 /// Largest overshoot of a quintic that brings a lateral speed u to rest over T with no change

@@ -818,7 +818,7 @@ fn merge_geometry_conflicts_where_the_ramp_joins() {
 }
 
 /// A lone ego at `speed` on the paper's straight westbound lane, after one step.
-fn lone_ego(speed: f64) -> DecisionCore {
+fn lone_ego(speed: f64) -> Box<DecisionCore> {
     let mut core = paper_core(Params::default());
     let ego = AgentState::moving(0, Vec2::new(40.0, 5.0), std::f64::consts::PI, speed);
     let scene = concord_core::Scene::new(0.0, ego, paper::WEST_STRAIGHT);

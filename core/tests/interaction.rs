@@ -230,7 +230,7 @@ fn motion_reads_the_speed_trend_when_no_acceleration_is_reported() {
 /// The paper's CAV on its left turn `cav_before` m before the stop line at `v` m/s, and a car on
 /// the minor road (northbound) `minor_before` m before its crossing with the turn at `mv`
 /// m/s, braking at `md` m/s².
-fn priority_scene(v: f64, minor_before: f64, mv: f64, md: f64) -> (DecisionCore, Scene) {
+fn priority_scene(v: f64, minor_before: f64, mv: f64, md: f64) -> (Box<DecisionCore>, Scene) {
     let core = paper_core(Params::default());
     let m = *core.morphology();
     let (s_cav, s_minor) = m
@@ -620,8 +620,8 @@ fn a_yielding_car_is_forecast_to_stop_so_the_ego_can_go_first() {
     let mut equal = Params::default();
     // Without the right of way (so its motion alone decides), a cruising car drives on.
     equal.interaction.trust_yield = 0.8;
-    let core = DecisionCore::new(equal, BuiltIn::PaperIntersection.morphology());
-    let mut core = core.unwrap();
+    let mut core =
+        Box::new(DecisionCore::new(equal, BuiltIn::PaperIntersection.morphology()).unwrap());
     let (_, scene) = priority_scene(8.0, 25.0, 8.0, 0.0);
     let mut s = scene;
     // Put the cruising car on the major road instead (it then has the right of way).
@@ -1121,7 +1121,11 @@ fn the_margins_keep_the_ego_out_of_its_whole_passage() {
 /// The paper's CAV `cav_before` m before its crossing with the HDV's lane at `cav_speed`
 /// m/s (its centre relative to the start of its passage, the zone), the HDV `hdv_before` m
 /// before its own passage at 10 m/s.
-fn before_the_crossing(cav_before: f64, cav_speed: f64, hdv_before: f64) -> (DecisionCore, Scene) {
+fn before_the_crossing(
+    cav_before: f64,
+    cav_speed: f64,
+    hdv_before: f64,
+) -> (Box<DecisionCore>, Scene) {
     let core = paper_core(Params::default());
     let m = *core.morphology();
     let c = m.conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT).unwrap();

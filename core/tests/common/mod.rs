@@ -18,6 +18,9 @@ pub fn paper_scene(t: f64, cav_speed: f64, hdv_speed: f64) -> Scene {
     scene
 }
 
-pub fn paper_core(params: Params) -> DecisionCore {
-    DecisionCore::new(params, BuiltIn::PaperIntersection.morphology()).expect("valid params")
+/// A core on the paper's junction, boxed as a deployment holds it (it is a few hundred KB).
+pub fn paper_core(params: Params) -> Box<DecisionCore> {
+    Box::new(
+        DecisionCore::new(params, BuiltIn::PaperIntersection.morphology()).expect("valid params"),
+    )
 }
