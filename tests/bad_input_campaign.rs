@@ -125,10 +125,10 @@ fn good_advice(request_id: u64, published_ns: u64) -> WireAdvice {
     wire_samples::advice(request_id, published_ns, 3)
 }
 
-fn paper_core() -> DecisionCore {
+fn paper_core() -> Box<DecisionCore> {
     let mut p = Params::default();
     p.trajectory.samples = 64;
-    DecisionCore::new(p, Geometry::PaperIntersection.morphology()).unwrap()
+    Box::new(DecisionCore::new(p, Geometry::PaperIntersection.morphology()).unwrap())
 }
 
 fn report(title: &str, n: usize, outcomes: &BTreeMap<String, usize>) {
@@ -483,8 +483,10 @@ fn random_configuration_files_are_refused_by_key_or_run() {
         |text| {
             let cfg: RunConfig = toml::from_str(text).map_err(|e| e.to_string())?;
             cfg.validate()?;
-            let mut core = DecisionCore::new(cfg.core, cfg.service.geometry.morphology())
-                .map_err(|e| e.to_string())?;
+            let mut core = Box::new(
+                DecisionCore::new(cfg.core, cfg.service.geometry.morphology())
+                    .map_err(|e| e.to_string())?,
+            );
             let s = good_frame(1, 1_000_000_000).to_scene().unwrap();
             let _ = core.step(&s, s.time_s, None);
             Ok(())
