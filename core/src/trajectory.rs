@@ -23,7 +23,6 @@ use crate::scene::{AgentState, Lane, Morphology, ProcessState, Vec2, MAX_AGENTS,
 pub const MAX_SAMPLES: usize = 1024;
 /// Most time steps of the horizon.
 pub const MAX_STEPS: usize = 64;
-
 /// Trajectory points: t = 0 and every step.
 pub const MAX_POINTS: usize = MAX_STEPS + 1;
 /// Occupancy boxes per time step; on overflow boxes are merged conservatively.
@@ -1027,8 +1026,11 @@ impl Planner {
                     // The other's extents along and across the lane, with the clearance.
                     let (ol, ow) = (other_l + margin, other_w + margin);
                     let (tangential, radial) = (c * ol + s * ow, s * ol + c * ow);
-                    let near = tangential + half_l + 2.0;
-                    let (kappa, side) = lane.curvature_within(fr.s - near, fr.s + near, fr.segment);
+                    // How the lane bends about the foot point: over both half lengths and 2 m
+                    // more on either side.
+                    let bend_m = tangential + half_l + 2.0;
+                    let (kappa, side) =
+                        lane.curvature_within(fr.s - bend_m, fr.s + bend_m, fr.segment);
                     let reach = curved_reach(
                         (fr.s, fr.l),
                         (half_l, half_w),
