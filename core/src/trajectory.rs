@@ -219,12 +219,13 @@ fn curved_reach(
     }
     let rho = 1.0 / kappa;
     let half_circle = core::f64::consts::PI * rho;
+    let diagonal = sqrt(tangential * tangential + radial * radial);
     // The nearest the ego's rectangle comes to O.
     let ego_in = rho - l_ego - hw;
     if side == 0.0 || ego_in < 0.5 {
         // Bends both ways, or so sharply that the ego can reach the centre: half the circle
         // along, and across both rectangles' diagonals.
-        let d = sqrt(hl * hl + hw * hw) + sqrt(tangential * tangential + radial * radial);
+        let d = sqrt(hl * hl + hw * hw) + diagonal;
         return Some([
             s - half_circle,
             s + half_circle,
@@ -253,7 +254,6 @@ fn curved_reach(
     // The other's points the ego can touch are at least `touch` from O: within
     // asin(diagonal / touch) of the other's own angle, as well as within its own sector.
     let touch = (r_lo - hw).max(1e-3);
-    let diagonal = sqrt(tangential * tangential + radial * radial);
     let sector = if near > 0.3 {
         libm::atan(tangential / near)
     } else {
