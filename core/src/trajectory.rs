@@ -1624,7 +1624,10 @@ pub enum Reject {
 
 #[cfg(test)]
 mod tests {
-    use super::{Footprint, FrenetState, Hit, LaneFrame, Occupancy, Planner, VCAP_BINS};
+    use super::{
+        curved_reach, Footprint, FrenetState, Hit, LaneFrame, Occupancy, Planner, MAX_BOXES,
+        VCAP_BINS,
+    };
     use crate::choice::Profile;
     use crate::params::Params;
     use crate::scene::{Lane, Turn, Vec2};
@@ -1681,6 +1684,82 @@ mod tests {
             planner.end_l[0], 0.0,
             "at the threshold the offset is sampled (z = 0)"
         );
+    }
+
+    #[test]
+    fn a_box_beyond_the_last_slot_merges_into_the_one_it_grows_least() {
+        // Every slot of a step filled with 2 × 2 m boxes 10 m apart along the lane; one more,
+        // just past box 5's end, goes into box 5 (growth 1 m × 2 m), and every other box is
+        // left as it was.
+        let mut occ = Occupancy::default();
+        for k in 0..MAX_BOXES {
+            let s = 10.0 * k as f64;
+            occ.add(0, s, s + 2.0, -1.0, 1.0, false, None);
+        }
+        occ.add(0, 52.5, 53.0, -1.0, 1.0, false, None);
+        for (k, b) in occ.boxes(0).enumerate() {
+            let s = 10.0 * k as f64;
+            let end = if k == 5 { 53.0 } else { s + 2.0 };
+            assert_eq!(b, (s, end, -1.0, 1.0, false), "box {k}");
+        }
+    }
+
+    #[test]
+    fn a_curve_box_stays_within_the_egos_lateral_bound_where_it_cannot_reach_the_centre() {
+        // The ego's centre stays within ±l_ego of its lane, so on a turn whose centre it
+        // cannot reach no box needs to reach further out than that (or than the straight box
+        // around the other car): radii 5–40 m, either side, cars across the lane.
+        let (hl, hw, l_ego) = (2.4, 0.9, 3.0);
+        for rho in [5.0, 10.0, 20.0, 40.0] {
+            for side in [-1.0, 1.0] {
+                for l in [-2.5, -1.0, 0.0, 1.0, 2.5] {
+                    let (tangential, radial) = (2.4, 0.9);
+                    let b = curved_reach(
+                        (30.0, l),
+                        (hl, hw),
+                        tangential,
+                        radial,
+                        1.0 / rho,
+                        side,
+                        l_ego,
+                    );
+                    let Some([_, _, l_lo, l_hi]) = b else {
+                        continue;
+                    };
+                    let straight = (l - hw - radial - 0.25, l + hw + radial + 0.25);
+                    let (lo, hi) = (straight.0.min(-l_ego - 0.25), straight.1.max(l_ego + 0.25));
+                    assert!(
+                        l_lo >= lo - 1e-9 && l_hi <= hi + 1e-9,
+                        "ρ {rho}, side {side}, l {l}: [{l_lo}, {l_hi}] beyond [{lo}, {hi}]"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn on_a_bend_the_ego_can_reach_the_centre_of_the_box_spans_both_diagonals() {
+        // A 3 m radius turn, the ego allowed 3 m off its lane: it can reach the centre, so the
+        // box is half the circle along and, across, at least the two rectangles'
+        // half-diagonals on either side (the centre distance at which they can still touch).
+        let (hl, hw, tangential, radial) = (2.4, 0.9, 2.5, 1.0);
+        let [s_lo, s_hi, l_lo, l_hi] = curved_reach(
+            (30.0, 0.5),
+            (hl, hw),
+            tangential,
+            radial,
+            1.0 / 3.0,
+            1.0,
+            3.0,
+        )
+        .expect("reachable");
+        let touch = (hl * hl + hw * hw).sqrt() + (tangential * tangential + radial * radial).sqrt();
+        assert!(
+            l_lo <= 0.5 - touch && l_hi >= 0.5 + touch,
+            "[{l_lo}, {l_hi}]"
+        );
+        let half_circle = core::f64::consts::PI * 3.0;
+        assert!(s_lo <= 30.0 - half_circle && s_hi >= 30.0 + half_circle);
     }
 
     #[test]

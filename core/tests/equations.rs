@@ -4,7 +4,7 @@ mod common;
 use common::*;
 use concord_core::advice::{gate, Advice, AdviceVerdict, GateContext, RequestLog};
 use concord_core::choice::{argmax, correct, cosine, idm_accel, ChoiceHistory, Maneuver, Profile};
-use concord_core::opm::{delta_ttc, guarded_ttc};
+use concord_core::opm::{delta_ttc, guarded_ttc, MAX_SELECTED};
 use concord_core::params::{AdviceParams, ChoiceParams, OpmParams, Params, TrajectoryParams};
 use concord_core::saliency::{attend, softmax, Saliency, FEATURES};
 use concord_core::scene::{AgentState, Morphology, ProcessState, Turn, Vec2, MAX_AGENTS};
@@ -987,6 +987,42 @@ fn eq4_an_agent_is_selected_by_its_delta_ttc_or_its_closeness_only() {
 }
 
 #[test]
+fn eq4_more_risky_agents_than_slots_keep_the_lowest_delta_ttcs_in_order() {
+    // The CAV at 5 m/s 18.7 m before the crossing (TTC 3.7 s); eleven HDVs at 8 m/s on the
+    // straight lane, 1, 7, …, 61 m before it, listed nearest first: every one is a risky
+    // conflict (|ΔTTC| 0.1–3.9 s), three more than the triplet holds. It keeps
+    // the eight lowest |ΔTTC|, sorted, whatever their order in the scene.
+    let mut core = paper_core(Params::default());
+    let m = *core.morphology();
+    let (s_cav, s_hdv) = m
+        .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
+        .unwrap();
+    let (ego, h, _) = m.lane(paper::CAV_LEFT).pose_at(s_cav - 18.7, 0);
+    let mut scene = paper_scene(0.0, 5.0, 0.0);
+    scene.ego = AgentState::moving(0, ego, h, 5.0);
+    scene.n_agents = 0;
+    for k in 0..11 {
+        let (pos, h, _) = m
+            .lane(paper::HDV_STRAIGHT)
+            .pose_at(s_hdv - 1.0 - 6.0 * k as f64, 0);
+        scene.push(AgentState::moving(1 + k, pos, h, 8.0));
+    }
+    core.step(&scene, 0.0, None).unwrap();
+    let mut by_risk: Vec<(f64, u32)> = core
+        .conflicts()
+        .pairs()
+        .iter()
+        .map(|c| (c.delta_ttc_s, scene.agents[c.agent as usize].id))
+        .collect();
+    assert_eq!(by_risk.len(), 11);
+    by_risk.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let expected: Vec<u32> = by_risk.iter().take(MAX_SELECTED).map(|r| r.1).collect();
+    let kept: Vec<u32> = core.triplet().objects().iter().map(|o| o.id).collect();
+    assert_eq!(kept, expected, "{by_risk:?}");
+    assert!(!kept.contains(&1), "the nearest, |ΔTTC| 3.6 s, is left out");
+}
+
+#[test]
 fn eq12_to_15_the_choice_follows_its_history_when_utilities_tie() {
     // A lone ego turning left: accelerate and turn left have the same profile and utility,
     // and a tie goes to the lower index (accelerate). With a history of turning left in the
@@ -1136,6 +1172,49 @@ fn decelerate_stops_at_the_yield_point_braking_at_v0_squared_over_2d() {
     let d = concord_core::choice::profile(Maneuver::Decelerate, &ctx, &p);
     assert!((d.accel + 2.5).abs() < EPS, "{d:?}");
     assert!((d.duration - 4.0).abs() < EPS && d.stop_m == 20.0 && d.target_speed == 0.0);
+}
+
+#[test]
+fn decelerate_far_from_the_yield_point_approaches_at_the_speed_that_still_stops_there() {
+    // 2 m/s, 30 m to the point: slower than the approach speed v_a, which holding it for the
+    // yield check time τ = 1 s and then braking at b = 2 m/s² stops exactly at the point:
+    // v_a·τ + v_a²/(2b) = 30, v_a = 2(√31 − 1) ≈ 9.14 m/s.
+    let ctx = concord_core::choice::EgoContext {
+        speed: 2.0,
+        speed_cap: 13.9,
+        yield_distance: 30.0,
+        goal_distance: 100.0,
+        max_brake: 5.0,
+        min_duration: 1.0,
+        max_duration: 6.0,
+        yield_check_s: 1.0,
+        ..Default::default()
+    };
+    let p = ChoiceParams::default();
+    let d = concord_core::choice::profile(Maneuver::Decelerate, &ctx, &p);
+    let (b, tau, v) = (p.decelerate_mps2, 1.0, d.target_speed);
+    assert!((v * tau + v * v / (2.0 * b) - 30.0).abs() < 1e-6, "{d:?}");
+    assert!(
+        (v - 2.0 * (31f64.sqrt() - 1.0)).abs() < 1e-6 && d.stop_m == 30.0,
+        "{d:?}"
+    );
+}
+
+#[test]
+fn each_risky_conflict_adds_the_intensity_gain_to_the_safety_preference() {
+    // The paper's start at 8 m/s, no stated intents: the safety preference is 1 plus the
+    // intensity gain per risky conflict.
+    let mut core = paper_core(Params::default());
+    core.step(&paper_scene(0.0, 8.0, 8.0), 0.0, None).unwrap();
+    let risky = core.triplet().risky_conflicts(&core.params().opm).count();
+    assert!(risky > 0);
+    let gain = ChoiceParams::default().conflict_intensity_safety;
+    let expected = 1.0 + gain * risky as f64;
+    assert!(
+        (core.choice().safety_preference - expected).abs() < EPS,
+        "{} != {expected}",
+        core.choice().safety_preference
+    );
 }
 
 #[test]
@@ -1451,17 +1530,20 @@ fn an_ego_drifting_out_at_its_lateral_bound_still_has_a_plan() {
     // Leaving the turn at 10 m/s with 0.97 m offset, drifting outwards at 0.3 m/s: no
     // quintic can hold 1 m, but the quickest correction overshoots by only 16/81·u·T, which
     // the bound allows; the ego steers back instead of braking for nothing.
+    // The same on the other side of the lane.
     let p = Params::default().trajectory;
-    let (mut planner, _) = empty_road_planner(60.0, 10.0);
-    planner.start.l = 0.97;
-    planner.start.dl = 0.3;
-    let back = planner.evaluate(2.0, 10.0, 0.0, &p);
-    assert!(back.is_ok(), "{back:?}");
-    // A slow correction drifts further and stays refused.
-    assert!(matches!(
-        planner.evaluate(4.0, 10.0, 0.97, &p),
-        Err(Reject::Limits)
-    ));
+    for side in [1.0, -1.0] {
+        let (mut planner, _) = empty_road_planner(60.0, 10.0);
+        planner.start.l = 0.97 * side;
+        planner.start.dl = 0.3 * side;
+        let back = planner.evaluate(2.0, 10.0, 0.0, &p);
+        assert!(back.is_ok(), "side {side}: {back:?}");
+        // A slow correction drifts further and stays refused.
+        assert!(matches!(
+            planner.evaluate(4.0, 10.0, 0.97 * side, &p),
+            Err(Reject::Limits)
+        ));
+    }
 }
 
 #[test]

@@ -566,7 +566,8 @@ fn the_planner_sees_a_car_that_arrives_at_the_crossing_with_the_ego() {
 fn the_planner_keeps_the_margins_in_the_egos_passage_of_the_zone_only() {
     // The ego 10 m along its lane at 6 m/s; a car 20 m ahead of it in that lane at 4 m/s, in
     // its passage of a zone for the whole horizon; the ego's passage of that zone is 25–35 m
-    // ahead. The margin boxes lie there, not along the car's whole path.
+    // ahead. The margin boxes lie there, not along the car's whole path, and span every
+    // lateral offset the ego can take.
     let morph = BuiltIn::PaperIntersection.morphology();
     let p = Params::default().trajectory;
     let s0 = 10.0;
@@ -602,10 +603,16 @@ fn the_planner_keeps_the_margins_in_the_egos_passage_of_the_zone_only() {
         .flat_map(|k| planner.occupancy.boxes(k).filter(|b| b.4))
         .collect();
     assert!(!margins.is_empty(), "the car gets margin boxes");
-    for (lo, hi, ..) in margins {
+    // At any lateral offset: across the lane and as far out as the ego's centre may go.
+    let reach = morph.lane(paper::CAV_LEFT).half_width + p.max_lateral_offset_m;
+    for (lo, hi, l_lo, l_hi, _) in margins {
         assert!(
             lo >= s0 + 25.0 - 1e-9 && hi <= s0 + 35.0 + 1e-9,
             "a margin box over [{lo:.2}, {hi:.2}] m, outside the passage [35, 45] m"
+        );
+        assert!(
+            l_lo <= -reach && l_hi >= reach,
+            "a margin box over l [{l_lo:.2}, {l_hi:.2}] m, not all of ±{reach} m"
         );
     }
 }
