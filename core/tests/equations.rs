@@ -506,11 +506,21 @@ fn crossing_scene(
     cav_speed: f64,
     hdv_before: f64,
 ) -> concord_core::Scene {
-    let (s_cav, s_hdv) = m
-        .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
-        .unwrap();
+    crossing_scene_on(m, paper::HDV_STRAIGHT, cav_before, cav_speed, hdv_before)
+}
+
+/// [`crossing_scene`] with the HDV on lane `hdv_lane`, measured from its crossing with the
+/// CAV's lane.
+fn crossing_scene_on(
+    m: &Morphology,
+    hdv_lane: u8,
+    cav_before: f64,
+    cav_speed: f64,
+    hdv_before: f64,
+) -> concord_core::Scene {
+    let (s_cav, s_hdv) = m.conflict_between(paper::CAV_LEFT, hdv_lane).unwrap();
     let (cav, h_cav, _) = m.lane(paper::CAV_LEFT).pose_at(s_cav - cav_before, 0);
-    let (hdv, h_hdv, _) = m.lane(paper::HDV_STRAIGHT).pose_at(s_hdv - hdv_before, 0);
+    let (hdv, h_hdv, _) = m.lane(hdv_lane).pose_at(s_hdv - hdv_before, 0);
     let mut scene = concord_core::Scene::new(
         0.0,
         AgentState::moving(0, cav, h_cav, cav_speed),
@@ -655,14 +665,23 @@ fn inside_the_junction_the_fallback_drives_on_rather_than_brake_into_contact() {
     // when braking is predicted to be hit (the footprints overlapping), the fallback drives
     // on whenever a drive-on
     // candidate is within the limits, also where its contact would come sooner; and it never
-    // stands inside a conflict zone when a plan that clears it free of contact exists.
+    // stands inside a conflict zone when a plan that clears it free of contact exists. Also
+    // at its first crossing (the northbound lane, where its turn begins), just past its stop
+    // line, where it has passed no zone yet.
+    fallback_inside_the_junction(paper::HDV_STRAIGHT, &[0.0, 2.0, 4.0, 6.0]);
+    fallback_inside_the_junction(paper::NORTH_STRAIGHT, &[0.0, 1.0, 2.0, 3.0]);
+}
+
+/// The body of [`inside_the_junction_the_fallback_drives_on_rather_than_brake_into_contact`]
+/// for an HDV on `hdv_lane` and the CAV `cav_befores` m before that crossing.
+fn fallback_inside_the_junction(hdv_lane: u8, cav_befores: &[f64]) {
     let p = Params::default();
     let n = p.trajectory.later_samples();
     let (mut hit, mut sooner) = (0, 0);
-    for cav_before in [0.0, 2.0, 4.0, 6.0] {
+    for &cav_before in cav_befores {
         for hdv_before in (2..30).map(|d| d as f64) {
             let mut core = paper_core(p);
-            let scene = crossing_scene(core.morphology(), cav_before, 6.0, hdv_before);
+            let scene = crossing_scene_on(core.morphology(), hdv_lane, cav_before, 6.0, hdv_before);
             let d = core.step(&scene, 0.0, None).unwrap();
             if d.source != concord_core::DecisionSource::MinimumRisk {
                 continue;
@@ -702,7 +721,10 @@ fn inside_the_junction_the_fallback_drives_on_rather_than_brake_into_contact() {
             );
         }
     }
-    assert!(hit > 0 && sooner > 0, "{hit} hit, {sooner} sooner");
+    assert!(
+        hit > 0 && sooner > 0,
+        "lane {hdv_lane}: {hit} hit, {sooner} sooner"
+    );
 }
 
 #[test]
