@@ -311,6 +311,8 @@ _INTERSECTION = {
     "road": ["--geometry", "highway-env-intersection"],
     "config": "highway-env.toml",
     "route_lane": HWI_EGO_LEFT,
+    # The ego's approach road, where followers queue behind it (ImposedBraking).
+    "approach": ("o0", "ir0"),
     "progress": intersection_progress,
     "arrived": intersection_arrived,
     "max_speed": 20.0,
@@ -742,6 +744,10 @@ class OthersMonitor:
         self.prev = cur
 
 
+# Who brakes for the ego, in ImposedBraking's split.
+IMPOSED_PARTS = ("queue", "regulation", "leader")
+
+
 class ImposedBraking:
     """The braking the ego imposes on other vehicles: each frame, for a vehicle that the ego
     holds up by highway-env's own rules, the braking it does with the ego beyond what it would
@@ -762,11 +768,26 @@ class ImposedBraking:
     Braking in the episode's first step (``t`` = 0) is left out: it answers where the
     environment placed the ego (close in front of a follower, say), not anything it did. It
     patches ``IDMVehicle.act`` and ``RegulatedRoad.enforce_road_rules`` while ``attached``
-    (the same arithmetic first, the vehicles' own calls after: the simulation is unchanged)."""
+    (the same arithmetic first, the vehicles' own calls after: the simulation is unchanged).
 
-    def __init__(self):
+    With ``approach`` (the ego's approach road, (from, to) node names) the braking is also
+    split by who brakes, in ``max_part``:
+
+    * ``queue``: a vehicle on that road (behind the ego, which it follows or yields to) while
+      the ego has not entered the junction (its centre at most half a car length past the
+      road's end, where it waits at its line): any car waiting there makes followers brake,
+      and highway-env's IDM brakes up to its 6 m/s² limit behind a standing car;
+    * ``regulation``: any other vehicle that ``RegulatedRoad`` made yield to the ego, which
+      highway-env does by setting its target speed to 0, so its IDM brakes at its 6 m/s²
+      limit at once, however far it is from the conflict;
+    * ``leader``: any other vehicle that has the ego as its leader (the ego merged in front
+      of it, or it follows the ego through the junction)."""
+
+    def __init__(self, approach=None):
+        self.approach = approach
         self.max_decel = 0.0
         self.max_decel_t = None
+        self.max_part = dict.fromkeys(IMPOSED_PARTS, 0.0)
         self.max_whole = 0.0
         self.t = 0.0
         self.road = None
@@ -831,7 +852,23 @@ class ImposedBraking:
             share = min(without, 0.0) - with_ego
             if share > self.max_decel:
                 self.max_decel, self.max_decel_t = share, self.t
+            part = "queue" if self.queued(v) else "regulation" if yields else "leader"
+            self.max_part[part] = max(self.max_part[part], share)
             self.max_whole = max(self.max_whole, -with_ego)
+
+    def queued(self, v):
+        """Whether ``v`` waits behind the ego on the ego's approach road while the ego has not
+        entered the junction (see the class)."""
+        if self.approach is None or tuple(v.lane_index[:2]) != tuple(self.approach):
+            return False
+        ego, network = self.ego, self.road.network
+        index = network.get_closest_lane_index(ego.position, ego.heading)
+        if tuple(index[:2]) == tuple(self.approach):
+            return True
+        if index[0] != self.approach[1]:
+            return False
+        along = network.get_lane(index).local_coordinates(ego.position)[0]
+        return along <= ego.LENGTH / 2
 
 
 class PetTracker(PetGrid):
@@ -913,7 +950,7 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
     standing_steps = 0
     crash = None
     monitor = OthersMonitor(u, period)
-    imposed = ImposedBraking()
+    imposed = ImposedBraking(spec.get("approach"))
     pet = u.road.pet_tracker = PetTracker(u.vehicle)
     limit = spec["time_limit_s"]
     discrete = None if name == "concord" else u.action_type.actions_indexes[DISCRETE[name]]
@@ -975,6 +1012,11 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
         "imposed_decel_mps2": imposed.max_decel,
         "imposed_decel_t_s": imposed.max_decel_t,
         "imposed_whole_decel_mps2": imposed.max_whole,
+        # The same split by who brakes (ImposedBraking with the env's approach; None: not
+        # split): followers queued behind the ego at its line, vehicles the regulation made
+        # yield to it, vehicles it leads.
+        **{f"imposed_{k}_decel_mps2": imposed.max_part[k] if imposed.approach else None
+           for k in IMPOSED_PARTS},
         # Smallest centre-to-centre distance between the ego and another vehicle, m (None: the
         # ego was alone).
         "min_distance_m": None if math.isinf(monitor.min_distance) else monitor.min_distance,
@@ -987,6 +1029,19 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
     }
     e["outcome"] = outcome_kind(e)
     return e
+
+
+def split_imposed(episodes):
+    """The imposed braking's split (``ImposedBraking.queued``): the largest of each part and
+    the episodes harder than the threshold in each; empty when the episodes are not split."""
+    if any(e.get("imposed_queue_decel_mps2") is None for e in episodes):
+        return {}
+    out = {}
+    for part in IMPOSED_PARTS:
+        d = [e[f"imposed_{part}_decel_mps2"] for e in episodes]
+        out[f"{part}_max_mps2"] = float(np.max(d))
+        out[f"{part}_episodes_harder_than_threshold"] = sum(x > HARD_BRAKING_MPS2 for x in d)
+    return out
 
 
 def summarize(env_name, name, episodes):
@@ -1027,7 +1082,8 @@ def summarize(env_name, name, episodes):
             "episodes_harder_than_threshold": sum(d > HARD_BRAKING_MPS2 for d in imposed),
             "threshold_mps2": HARD_BRAKING_MPS2,
             "whole_max_mps2": float(np.max(whole)),
-            "whole_episodes_harder_than_threshold": sum(d > HARD_BRAKING_MPS2 for d in whole)},
+            "whole_episodes_harder_than_threshold": sum(d > HARD_BRAKING_MPS2 for d in whole),
+            **split_imposed(episodes)},
         "min_distance_m": {"min": float(np.min(dist)) if dist else None,
                            "median": float(np.median(dist)) if dist else None},
         "pet_s": {"episodes": len(pets),
@@ -1092,6 +1148,16 @@ def detail_lines(s):
         f"{s['imposed_braking']['episodes_harder_than_threshold']} (counting the vehicle's "
         f"whole braking: {s['imposed_braking']['whole_episodes_harder_than_threshold']})",
     ]
+    i = s["imposed_braking"]
+    if "queue_max_mps2" in i:
+        lines.append(
+            f"  by who brakes (max m/s², episodes harder than {i['threshold_mps2']:.0f} m/s²): "
+            + "; ".join(f"{what} {i[k + '_max_mps2']:.2f}, "
+                        f"{i[k + '_episodes_harder_than_threshold']}"
+                        for k, what in zip(IMPOSED_PARTS, (
+                            "followers queued behind the ego at its line",
+                            "vehicles the regulation made yield to it",
+                            "vehicles it leads (merged in front of them, or in the junction)"))))
     if d["min"] is not None:
         lines.append(f"closest other vehicle (centre to centre): min {d['min']:.2f} m, median "
                      f"of episode minima {d['median']:.2f} m")

@@ -505,9 +505,9 @@ class EpisodeFields(unittest.TestCase):
                                           "timed_out": True}), "decision_timeout")
 
 
-def _standing_ego(hb):
-    """An intersection-v0 env reset at seed 0 with the ego standing 60 m into its approach."""
-    env = hb.make_env("intersection-v0", "concord", 5, hb.ENVS["intersection-v0"])
+def _standing_ego(hb, name="intersection-v0"):
+    """An intersection env reset at seed 0 with the ego standing 60 m into its approach."""
+    env = hb.make_env(name, "concord", 5, hb.ENVS[name])
     env.reset(seed=0)
     u = env.unwrapped
     lane = u.road.network.get_lane(("o0", "ir0", 0))
@@ -592,7 +592,7 @@ class Imposed(unittest.TestCase):
                 leader = IDMVehicle.make_on_lane(road, approach, 60.0, speed=0.0)
                 leader.plan_route_to("o1")
                 road.vehicles.append(leader)
-            imposed = hb.ImposedBraking()
+            imposed = hb.ImposedBraking(hb.ENVS["intersection-v0"]["approach"])
             imposed.t = 0.2
             with imposed.attached(u):
                 # The regulation's turn now: the follower yields (to the ego or its leader).
@@ -605,7 +605,64 @@ class Imposed(unittest.TestCase):
                 env.step(np.array([0.0, 0.0], dtype=np.float32))
             self.assertEqual(first.max_decel, 0.0)
             self.assertGreaterEqual(imposed.max_whole, imposed.max_decel)
+            # Split by who brakes: here the follower waits behind the ego on its approach.
+            self.assertEqual(imposed.max_part, {"queue": imposed.max_decel if behind_ego else 0.0,
+                                                "regulation": 0.0, "leader": 0.0})
             return imposed.max_decel, (10.0 - follower.speed) / 0.4, imposed.max_whole
+        finally:
+            env.close()
+
+    def test_a_follower_braking_for_the_ego_inside_the_junction_is_not_a_queue(self):
+        """The ego standing 8 m into its left turn, past its line, and an IDM car 16 m behind
+        it on its approach at 10 m/s (intersection-v2, whose cars see a leader on the next
+        lane): its braking counts on the other side of the split."""
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+        from highway_env.vehicle.behavior import IDMVehicle
+
+        env, u = _standing_ego(hb, "intersection-v2")
+        try:
+            road, ego = u.road, u.vehicle
+            turn = road.network.get_lane(("ir0", "il1", 0))
+            ego.position, ego.heading = turn.position(8.0, 0.0), turn.heading_at(8.0)
+            ego.lane_index, ego.lane = ("ir0", "il1", 0), turn
+            follower = IDMVehicle.make_on_lane(road, ("o0", "ir0", 0), 92.0, speed=10.0)
+            follower.plan_route_to("o1")
+            road.vehicles = [ego, follower]
+            imposed = hb.ImposedBraking(hb.ENVS["intersection-v0"]["approach"])
+            imposed.t = 0.2
+            with imposed.attached(u):
+                env.step(np.array([0.0, 0.0], dtype=np.float32))
+            self.assertGreater(imposed.max_decel, 3.0)
+            self.assertEqual(imposed.max_part,
+                             {"queue": 0.0, "regulation": 0.0, "leader": imposed.max_decel})
+        finally:
+            env.close()
+
+    def test_a_car_the_regulation_makes_yield_to_the_ego_counts_apart(self):
+        """A car on the opposite approach at 8 m/s that ``RegulatedRoad`` made yield to the
+        ego (its target speed 0, as the regulation sets it; marked here, one step into its
+        yield): highway-env's IDM then brakes at its 6 m/s² limit, counted as the
+        regulation's."""
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+        from highway_env.vehicle.behavior import IDMVehicle
+
+        env, u = _standing_ego(hb)
+        try:
+            road, ego = u.road, u.vehicle
+            other = IDMVehicle.make_on_lane(road, ("o2", "ir2", 0), 60.0, speed=8.0)
+            other.plan_route_to("o1")
+            other.target_speed, other.is_yielding, other.yield_timer = 0.0, True, 1
+            other.yields_to_ego = True
+            road.vehicles = [ego, other]
+            imposed = hb.ImposedBraking(hb.ENVS["intersection-v0"]["approach"])
+            imposed.t = 0.2
+            with imposed.attached(u):
+                env.step(np.array([0.0, 0.0], dtype=np.float32))
+            self.assertGreater(imposed.max_decel, 5.0)
+            self.assertEqual(imposed.max_part,
+                             {"queue": 0.0, "regulation": imposed.max_decel, "leader": 0.0})
         finally:
             env.close()
 
