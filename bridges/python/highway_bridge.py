@@ -788,6 +788,8 @@ class ImposedBraking:
         self.max_decel = 0.0
         self.max_decel_t = None
         self.max_part = dict.fromkeys(IMPOSED_PARTS, 0.0)
+        # Where each part's largest braking happened: [t s, x m, y m, that vehicle's speed m/s].
+        self.max_part_at = dict.fromkeys(IMPOSED_PARTS)
         self.max_whole = 0.0
         self.t = 0.0
         self.road = None
@@ -853,7 +855,9 @@ class ImposedBraking:
             if share > self.max_decel:
                 self.max_decel, self.max_decel_t = share, self.t
             part = "queue" if self.queued(v) else "regulation" if yields else "leader"
-            self.max_part[part] = max(self.max_part[part], share)
+            if share > self.max_part[part]:
+                self.max_part[part] = share
+                self.max_part_at[part] = [self.t, *map(float, v.position), float(v.speed)]
             self.max_whole = max(self.max_whole, -with_ego)
 
     def queued(self, v):
@@ -1017,6 +1021,9 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
         # yield to it, vehicles it leads.
         **{f"imposed_{k}_decel_mps2": imposed.max_part[k] if imposed.approach else None
            for k in IMPOSED_PARTS},
+        # When and where each part's largest braking happened: [t, x, y, speed] of the
+        # braking vehicle (None: none), to find it in a --trace.
+        **{f"imposed_{k}_at": imposed.max_part_at[k] for k in IMPOSED_PARTS},
         # Smallest centre-to-centre distance between the ego and another vehicle, m (None: the
         # ego was alone).
         "min_distance_m": None if math.isinf(monitor.min_distance) else monitor.min_distance,

@@ -663,6 +663,13 @@ class Imposed(unittest.TestCase):
             self.assertGreater(imposed.max_decel, 5.0)
             self.assertEqual(imposed.max_part,
                              {"queue": 0.0, "regulation": imposed.max_decel, "leader": 0.0})
+            # Recorded where it braked: on the opposite approach, at its speed then.
+            t, x, y, speed = imposed.max_part_at["regulation"]
+            self.assertEqual(t, 0.2)
+            self.assertLess(abs(x - (-2.0)), 0.5)
+            self.assertLess(y, -11.0)
+            self.assertLess(abs(speed - 8.0), 0.5)
+            self.assertIsNone(imposed.max_part_at["leader"])
         finally:
             env.close()
 
