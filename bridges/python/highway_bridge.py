@@ -865,14 +865,12 @@ class ImposedBraking:
         entered the junction (see the class)."""
         if self.approach is None or tuple(v.lane_index[:2]) != tuple(self.approach):
             return False
-        ego, network = self.ego, self.road.network
-        index = network.get_closest_lane_index(ego.position, ego.heading)
-        if tuple(index[:2]) == tuple(self.approach):
+        ego = self.ego
+        if tuple(ego.lane_index[:2]) == tuple(self.approach):
             return True
-        if index[0] != self.approach[1]:
+        if ego.lane_index[0] != self.approach[1]:
             return False
-        along = network.get_lane(index).local_coordinates(ego.position)[0]
-        return along <= ego.LENGTH / 2
+        return ego.lane.local_coordinates(ego.position)[0] <= ego.LENGTH / 2
 
 
 class PetTracker(PetGrid):

@@ -563,6 +563,18 @@ class Reversing(unittest.TestCase):
         self.assertEqual((s["collisions_reversing"], s["collisions_with_crashed"]), (1, 1))
 
 
+def _imposed_over_one_step(hb, env, u, before=None):
+    """One env step at t = 0.2 s with an ImposedBraking split at intersection-v0's approach
+    attached (``before`` runs first, attached): the monitor."""
+    imposed = hb.ImposedBraking(hb.ENVS["intersection-v0"]["approach"])
+    imposed.t = 0.2
+    with imposed.attached(u):
+        if before:
+            before()
+        env.step(np.array([0.0, 0.0], dtype=np.float32))
+    return imposed
+
+
 class Imposed(unittest.TestCase):
     """The braking the ego imposes: a follower braking for the ego counts, beyond what it would
     brake without the ego; a car braking for another car does not, and the episode's first step
@@ -592,14 +604,13 @@ class Imposed(unittest.TestCase):
                 leader = IDMVehicle.make_on_lane(road, approach, 60.0, speed=0.0)
                 leader.plan_route_to("o1")
                 road.vehicles.append(leader)
-            imposed = hb.ImposedBraking(hb.ENVS["intersection-v0"]["approach"])
-            imposed.t = 0.2
-            with imposed.attached(u):
+            def regulation():
                 # The regulation's turn now: the follower yields (to the ego or its leader).
                 road.enforce_road_rules()
                 self.assertTrue(follower.is_yielding)
                 self.assertEqual(follower.yields_to_ego, behind_ego)
-                env.step(np.array([0.0, 0.0], dtype=np.float32))
+
+            imposed = _imposed_over_one_step(hb, env, u, regulation)
             first = hb.ImposedBraking()  # t = 0: the episode's first step
             with first.attached(u):
                 env.step(np.array([0.0, 0.0], dtype=np.float32))
@@ -629,10 +640,7 @@ class Imposed(unittest.TestCase):
             follower = IDMVehicle.make_on_lane(road, ("o0", "ir0", 0), 92.0, speed=10.0)
             follower.plan_route_to("o1")
             road.vehicles = [ego, follower]
-            imposed = hb.ImposedBraking(hb.ENVS["intersection-v0"]["approach"])
-            imposed.t = 0.2
-            with imposed.attached(u):
-                env.step(np.array([0.0, 0.0], dtype=np.float32))
+            imposed = _imposed_over_one_step(hb, env, u)
             self.assertGreater(imposed.max_decel, 3.0)
             self.assertEqual(imposed.max_part,
                              {"queue": 0.0, "regulation": 0.0, "leader": imposed.max_decel})
@@ -656,10 +664,7 @@ class Imposed(unittest.TestCase):
             other.target_speed, other.is_yielding, other.yield_timer = 0.0, True, 1
             other.yields_to_ego = True
             road.vehicles = [ego, other]
-            imposed = hb.ImposedBraking(hb.ENVS["intersection-v0"]["approach"])
-            imposed.t = 0.2
-            with imposed.attached(u):
-                env.step(np.array([0.0, 0.0], dtype=np.float32))
+            imposed = _imposed_over_one_step(hb, env, u)
             self.assertGreater(imposed.max_decel, 5.0)
             self.assertEqual(imposed.max_part,
                              {"queue": 0.0, "regulation": imposed.max_decel, "leader": 0.0})
