@@ -1175,14 +1175,13 @@ fn the_leader_is_the_nearest_car_ahead_in_any_order_and_never_one_behind() {
     }
 }
 
-#[test]
-fn decelerate_stops_at_the_yield_point_braking_at_v0_squared_over_2d() {
-    // 10 m/s, 20 m to the yield point: faster than the approach speed 2(√21 − 1) m/s, so one
-    // stopping polynomial: −v0²/(2d) = −2.5 m/s² over T = 2d/v0 = 4 s.
+/// The nominal "decelerate" profile at `speed` m/s with the yield point `yield_distance` m
+/// ahead (yield check time 1 s, braking limit 5 m/s², durations 1–6 s).
+fn decelerate_towards(speed: f64, yield_distance: f64, p: &ChoiceParams) -> Profile {
     let ctx = concord_core::choice::EgoContext {
-        speed: 10.0,
+        speed,
         speed_cap: 13.9,
-        yield_distance: 20.0,
+        yield_distance,
         goal_distance: 100.0,
         max_brake: 5.0,
         min_duration: 1.0,
@@ -1190,8 +1189,15 @@ fn decelerate_stops_at_the_yield_point_braking_at_v0_squared_over_2d() {
         yield_check_s: 1.0,
         ..Default::default()
     };
+    concord_core::choice::profile(Maneuver::Decelerate, &ctx, p)
+}
+
+#[test]
+fn decelerate_stops_at_the_yield_point_braking_at_v0_squared_over_2d() {
+    // 10 m/s, 20 m to the yield point: faster than the approach speed 2(√21 − 1) m/s, so one
+    // stopping polynomial: −v0²/(2d) = −2.5 m/s² over T = 2d/v0 = 4 s.
     let p = ChoiceParams::default();
-    let d = concord_core::choice::profile(Maneuver::Decelerate, &ctx, &p);
+    let d = decelerate_towards(10.0, 20.0, &p);
     assert!((d.accel + 2.5).abs() < EPS, "{d:?}");
     assert!((d.duration - 4.0).abs() < EPS && d.stop_m == 20.0 && d.target_speed == 0.0);
 }
@@ -1201,19 +1207,8 @@ fn decelerate_far_from_the_yield_point_approaches_at_the_speed_that_still_stops_
     // 2 m/s, 30 m to the point: slower than the approach speed v_a, which holding it for the
     // yield check time τ = 1 s and then braking at b = 2 m/s² stops exactly at the point:
     // v_a·τ + v_a²/(2b) = 30, v_a = 2(√31 − 1) ≈ 9.14 m/s.
-    let ctx = concord_core::choice::EgoContext {
-        speed: 2.0,
-        speed_cap: 13.9,
-        yield_distance: 30.0,
-        goal_distance: 100.0,
-        max_brake: 5.0,
-        min_duration: 1.0,
-        max_duration: 6.0,
-        yield_check_s: 1.0,
-        ..Default::default()
-    };
     let p = ChoiceParams::default();
-    let d = concord_core::choice::profile(Maneuver::Decelerate, &ctx, &p);
+    let d = decelerate_towards(2.0, 30.0, &p);
     let (b, tau, v) = (p.decelerate_mps2, 1.0, d.target_speed);
     assert!((v * tau + v * v / (2.0 * b) - 30.0).abs() < 1e-6, "{d:?}");
     assert!(
