@@ -6,7 +6,9 @@
 //!   message): no panic, every pattern counted under exactly one outcome, every outcome seen.
 //!   One pattern in 500 also goes through a full core step.
 //! * The same kinds of frames and advice through a running core process over iceoryx2: its
-//!   counters add up, and the good frames that follow are decided again (no stuck state).
+//!   counters add up, and the good frames that follow are decided again (no stuck state). A
+//!   corrupt frame is refused for its content and never makes the good frames after it out of
+//!   order.
 //! * Random TOML for `concord run`'s and the sidecar's configuration: an error that names the
 //!   key, never a panic; what passes builds a core and steps it.
 //!
@@ -360,6 +362,61 @@ fn a_running_core_counts_every_bad_frame_and_decides_the_good_ones_after() {
         good_decided >= 30,
         "{good_decided} of 40 good frames decided after the barrage"
     );
+}
+
+#[test]
+fn a_corrupt_frame_is_refused_for_its_content_and_does_not_reorder_the_source() {
+    let prefix = format!("campaign-order-{}/", std::process::id());
+    let config = iox::init(None).expect("iceoryx2 config");
+    let sender = {
+        let (config, prefix) = (config.clone(), prefix.clone());
+        std::thread::spawn(move || {
+            let node = iox::node("order-sender", &config).expect("node");
+            let scenes =
+                iox::publisher::<SceneFrame>(&node, &services::name(&prefix, services::SCENE))
+                    .unwrap();
+            std::thread::sleep(Duration::from_millis(300));
+            iox::send(&scenes, &good_frame(1, now_ns())).unwrap();
+            std::thread::sleep(Duration::from_millis(50));
+            // Not finite, with a far sequence number and a stamp a minute ahead.
+            let mut bad = good_frame(1 << 40, now_ns() + 60_000_000_000);
+            bad.agents[0].x = f64::NAN;
+            iox::send(&scenes, &bad).unwrap();
+            for k in 2..=20 {
+                std::thread::sleep(Duration::from_millis(50));
+                iox::send(&scenes, &good_frame(k, now_ns())).unwrap();
+            }
+        })
+    };
+    let cfg = ServiceConfig {
+        prefix,
+        rate_hz: 200.0,
+        print_period_s: 0.0,
+        staleness_s: STALENESS_S,
+        ..ServiceConfig::default()
+    };
+    let stats = core_service::run(
+        &mut paper_core(),
+        &cfg,
+        None,
+        &RealtimeConfig::default(),
+        &config,
+        StopAfter {
+            ticks: None,
+            duration_s: Some(1.8),
+        },
+    )
+    .expect("the loop runs");
+    sender.join().unwrap();
+    let mut refused = [0; 5];
+    refused[FrameReject::NotFinite as usize] = 1;
+    assert_eq!(stats.frames_received, 21);
+    assert_eq!(
+        stats.frames_rejected, refused,
+        "only the corrupt frame is refused"
+    );
+    assert_eq!(stats.frames_accepted + stats.frames_superseded, 20);
+    assert_eq!(stats.publisher_restarts, 0);
 }
 
 /// The core's staleness window in this test, s.

@@ -511,12 +511,31 @@ impl Loop<'_> {
         }
     }
 
+    /// The counted reason for a scene the core refuses.
+    fn why(kind: SceneErrorKind) -> FrameReject {
+        match kind {
+            SceneErrorKind::NotFinite => FrameReject::NotFinite,
+            SceneErrorKind::OutOfRange => FrameReject::OutOfRange,
+        }
+    }
+
     fn reject(&mut self, why: FrameReject) {
         self.stats.frames_rejected[why as usize] += 1;
     }
 
+    /// Decides on one frame. Its content is checked first, so a corrupt frame is refused for
+    /// what is wrong with it and never moves the ordering state: only a valid frame's sequence
+    /// and stamp can make later frames out of order.
     fn decide_on(&mut self, f: &SceneFrame, rx: u64) {
         self.scene_age.record(rx.saturating_sub(f.stamp_ns));
+        let mut scene = match f.to_scene() {
+            Ok(s) => s,
+            Err(_) => return self.reject(FrameReject::BadCode),
+        };
+        let n_lanes = self.core.morphology().lanes().len();
+        if let Err(e) = scene.validate(&self.core.params().limits, n_lanes) {
+            return self.reject(Self::why(e.kind));
+        }
         if let Some((seq, stamp)) = self.last_frame {
             if f.sequence == seq {
                 return self.reject(FrameReject::Duplicate);
@@ -534,10 +553,6 @@ impl Loop<'_> {
             }
         }
         self.last_frame = Some((f.sequence, f.stamp_ns));
-        let mut scene = match f.to_scene() {
-            Ok(s) => s,
-            Err(_) => return self.reject(FrameReject::BadCode),
-        };
         if let Some(route) = &self.route {
             scene.ego_lane = route.lane_at(self.core.morphology(), scene.ego.pos);
         }
@@ -545,12 +560,7 @@ impl Loop<'_> {
         let started = now_ns();
         let decision = match self.core.step(&scene, secs(started), self.advice.as_ref()) {
             Ok(d) => d,
-            Err(e) => {
-                return self.reject(match e.kind {
-                    SceneErrorKind::NotFinite => FrameReject::NotFinite,
-                    SceneErrorKind::OutOfRange => FrameReject::OutOfRange,
-                })
-            }
+            Err(e) => return self.reject(Self::why(e.kind)),
         };
         let compute = now_ns() - started;
         self.stats.frames_accepted += 1;
