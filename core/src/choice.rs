@@ -11,9 +11,9 @@ use libm::{exp, sqrt};
 
 use crate::intent::Stated;
 use crate::opm::{ConflictPair, ConflictSet, OpmTriplet};
-use crate::params::{ChoiceParams, InteractionParams, OpmParams};
+use crate::params::{ChoiceParams, Follower, InteractionParams, OpmParams};
 use crate::saliency::softmax;
-use crate::scene::{IntentAction, Style, Turn};
+use crate::scene::{ConflictKind, IntentAction, Style, Turn};
 
 /// Number of maneuvers.
 pub const MANEUVERS: usize = 5;
@@ -135,6 +135,18 @@ impl Profile {
             t1 + (d - d1) / vt
         } else {
             f64::INFINITY
+        }
+    }
+
+    /// Speed `t` s after starting at `v0`, m/s: the ramp of [`Profile::arrival_time`].
+    pub fn speed_at(&self, v0: f64, t: f64) -> f64 {
+        let (a, vt) = (self.accel, self.target_speed);
+        if a.abs() < 1e-9 {
+            v0
+        } else if t >= ((vt - v0) / a).max(0.0) {
+            vt
+        } else {
+            v0 + a * t
         }
     }
 }
@@ -448,12 +460,17 @@ pub fn conflict_risk(
     (1.0 - yields.clamp(0.0, 1.0)) * r
 }
 
-/// The deceleration `profile` would impose on the other of conflict `c`, m/s²: when the ego
-/// goes first, the other must not enter its passage before the ego has left it plus
-/// `pet_behind_s`; after `reaction_s` at its speed v, with D m left and T s to go, it needs
-/// b = 2(vT − D)/T² (or v²/2D when that stops it first). A road user already yielding
-/// (`yields` ≥ `trust_yield`) has its own braking subtracted. 0 when the ego passes behind,
-/// does not enter, or the other is committed (then [`conflict_risk`] speaks).
+/// The deceleration `profile` would impose on the other of conflict `c`, m/s², when the ego
+/// goes first, as `follower` models the other:
+/// * [`Follower::Kinematic`]: it must not enter the ego's passage before the ego has left it
+///   plus `pet_behind_s`; after `reaction_s` at its speed v, with D m left and T s to go, it
+///   needs b = 2(vT − D)/T² (or v²/2D when that stops it first);
+/// * [`Follower::Idm`]: its hardest braking as the IDM follower of the ego ([`idm_follower_decel`]).
+///
+/// A road user already yielding (`yields` ≥ `trust_yield`) has its own braking subtracted. 0
+/// when the ego passes behind or does not enter, and for the kinematic follower when the
+/// other is committed (then [`conflict_risk`] speaks); an IDM follower brakes for a leader
+/// whether or not it could stop comfortably.
 pub fn imposed_decel(
     profile: &Profile,
     v0: f64,
@@ -462,7 +479,7 @@ pub fn imposed_decel(
     ip: &InteractionParams,
 ) -> f64 {
     let (t_in, t_out) = ego_interval(profile, v0, c);
-    if !t_in.is_finite() || c.intent.committed {
+    if !t_in.is_finite() || (c.intent.committed && ip.follower == Follower::Kinematic) {
         return 0.0;
     }
     let (a_in, a_out) = proceeding_interval(c, ip);
@@ -470,26 +487,88 @@ pub fn imposed_decel(
     if !ego_first {
         return 0.0;
     }
-    let v = c.agent_speed_mps;
-    let d = c.agent_pass_m[0] - v * ip.reaction_s;
-    let t = t_out + ip.pet_behind_s - ip.reaction_s;
-    let needed = if v < 1e-6 || v * t <= d {
-        0.0
-    } else if d <= 0.0 || t <= 0.0 {
-        f64::INFINITY
-    } else {
-        let b = 2.0 * (v * t - d) / (t * t);
-        if b * t <= v {
-            b
-        } else {
-            v * v / (2.0 * d)
+    let needed = match ip.follower {
+        Follower::Kinematic => {
+            let v = c.agent_speed_mps;
+            let d = c.agent_pass_m[0] - v * ip.reaction_s;
+            let t = t_out + ip.pet_behind_s - ip.reaction_s;
+            if v < 1e-6 || v * t <= d {
+                0.0
+            } else if d <= 0.0 || t <= 0.0 {
+                f64::INFINITY
+            } else {
+                let b = 2.0 * (v * t - d) / (t * t);
+                if b * t <= v {
+                    b
+                } else {
+                    v * v / (2.0 * d)
+                }
+            }
         }
+        Follower::Idm => idm_follower_decel(profile, v0, c, (t_in, t_out), ip),
     };
     if yields >= ip.trust_yield {
         (needed - c.intent.required_decel_mps2.min(needed)).max(0.0)
     } else {
         needed
     }
+}
+
+/// Step of [`idm_follower_decel`]'s integration, s.
+const FOLLOW_DT_S: f64 = 0.1;
+/// Longest integration of [`idm_follower_decel`], s.
+const FOLLOW_MAX_S: f64 = 10.0;
+/// Hardest braking the integrated follower applies, m/s² (a car's emergency braking).
+const FOLLOW_MAX_BRAKE_MPS2: f64 = 9.0;
+
+/// Hardest braking of the other of conflict `c` as the IDM follower (`follower_*`) of an ego
+/// that goes first under `profile`, m/s². The other keeps its speed until the ego enters its
+/// passage at `t_in`; from then until it leaves at `t_out` the ego is its leader,
+/// `agent_pass_m[0]` ahead of where it was: standing across its lane in a crossing, driving
+/// on at the ego's speed in a merge (the IDM brakes hardest when it first sees a leader, so
+/// the rest of a merge adds little). Integrated every `FOLLOW_DT_S`, its braking capped at
+/// `FOLLOW_MAX_BRAKE_MPS2` (the IDM's wish is what counts); ∞ if it would reach the ego.
+pub fn idm_follower_decel(
+    profile: &Profile,
+    v0: f64,
+    c: &ConflictPair,
+    (t_in, t_out): (f64, f64),
+    ip: &InteractionParams,
+) -> f64 {
+    let idm = Idm {
+        max_accel_mps2: ip.follower_max_accel_mps2,
+        comfort_decel_mps2: ip.follower_comfort_decel_mps2,
+        min_gap_m: ip.follower_min_gap_m,
+        headway_s: ip.follower_headway_s,
+        desired_speed_mps: ip.proceed_top_speed_mps.max(c.agent_speed_mps),
+    };
+    let merging = c.kind == ConflictKind::Merging;
+    let end = t_out.min(FOLLOW_MAX_S);
+    let (mut x, mut v, mut lead) = (0.0, c.agent_speed_mps.max(0.0), c.agent_pass_m[0]);
+    let (mut t, mut worst) = (0.0, 0.0_f64);
+    while t < end {
+        let mut a = 0.0;
+        if t >= t_in {
+            let gap = lead - x;
+            if gap <= 0.0 {
+                return f64::INFINITY;
+            }
+            let v_lead = if merging {
+                profile.speed_at(v0, t)
+            } else {
+                0.0
+            };
+            a = idm.accel(v, gap, v - v_lead);
+            worst = worst.max(-a);
+            a = a.max(-FOLLOW_MAX_BRAKE_MPS2);
+            lead += v_lead * FOLLOW_DT_S;
+        }
+        let v_next = (v + a * FOLLOW_DT_S).max(0.0);
+        x += 0.5 * (v + v_next) * FOLLOW_DT_S;
+        v = v_next;
+        t += FOLLOW_DT_S;
+    }
+    worst
 }
 
 /// Efficiency degree of `profile`: the time to cover `ctx.goal_distance` at the reference

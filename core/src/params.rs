@@ -218,6 +218,29 @@ pub struct InteractionParams {
     /// Utility penalty of a maneuver rejected for courtesy (kept finite so the logit stays
     /// defined; large enough that it is never chosen over one that is not rejected).
     pub courtesy_penalty: f64,
+    /// How the courtesy rule expects another road user to brake for an ego that goes first.
+    pub follower: Follower,
+    /// The IDM of [`Follower::Idm`] (its desired speed is `proceed_top_speed_mps`): minimum
+    /// gap s₀ from its front to the ego's passage, m; time headway T, s; maximum
+    /// acceleration a and comfortable deceleration b, m/s².
+    pub follower_min_gap_m: f64,
+    pub follower_headway_s: f64,
+    pub follower_max_accel_mps2: f64,
+    pub follower_comfort_decel_mps2: f64,
+}
+
+/// The courtesy rule's model of the braking of a road user the ego goes first in front of
+/// ([`crate::choice::imposed_decel`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Follower {
+    /// It reads the ego's intent early: after `reaction_s` it brakes at the least constant
+    /// deceleration that keeps `pet_behind_s` behind the ego's passage.
+    #[default]
+    Kinematic,
+    /// It brakes only for a car on its path, as for its IDM leader (`follower_*`): from the
+    /// moment the ego enters its passage until it leaves it (traffic such as highway-env's).
+    Idm,
 }
 
 impl Default for InteractionParams {
@@ -241,6 +264,12 @@ impl Default for InteractionParams {
             watch_s: 1.0,
             request_decel_mps2: 1.5,
             courtesy_penalty: 10.0,
+            follower: Follower::Kinematic,
+            // Treiber & Kesting's IDM calibrations, as the simulator's balanced driver.
+            follower_min_gap_m: 2.0,
+            follower_headway_s: 1.5,
+            follower_max_accel_mps2: 1.5,
+            follower_comfort_decel_mps2: 2.0,
         }
     }
 }
@@ -602,6 +631,30 @@ impl Params {
                 600.0,
             ),
             ("interaction.watch_s", i.watch_s, 0.0, 600.0),
+            (
+                "interaction.follower_min_gap_m",
+                i.follower_min_gap_m,
+                0.0,
+                100.0,
+            ),
+            (
+                "interaction.follower_headway_s",
+                i.follower_headway_s,
+                0.0,
+                10.0,
+            ),
+            (
+                "interaction.follower_max_accel_mps2",
+                i.follower_max_accel_mps2,
+                TINY,
+                20.0,
+            ),
+            (
+                "interaction.follower_comfort_decel_mps2",
+                i.follower_comfort_decel_mps2,
+                TINY,
+                20.0,
+            ),
             (
                 "interaction.request_decel_mps2",
                 i.request_decel_mps2,

@@ -11,7 +11,7 @@ use concord_core::choice::{
 use concord_core::intent::{infer, Motion, Stated};
 use concord_core::negotiation::{EgoState, Negotiation, Phase};
 use concord_core::opm::{ConflictPair, ConflictSet, OpmTriplet};
-use concord_core::params::{ChoiceParams, InteractionParams, OpmParams, Params};
+use concord_core::params::{ChoiceParams, Follower, InteractionParams, OpmParams, Params};
 use concord_core::scene::{
     AgentState, ConflictKind, ExplicitIntent, History, IntentAction, Morphology, ProcessState,
     Rated, RightOfWay, Vec2, MAX_AGENTS,
@@ -334,6 +334,62 @@ fn courtesy_refuses_a_plan_that_makes_the_other_brake_hard() {
     assert!(!out.courtesy_rejected[Maneuver::Decelerate.index()]);
     assert!(out.imposed_decel[Maneuver::TurnLeft.index()] > ip.max_imposed_decel_mps2);
     assert_eq!(out.choice, Maneuver::Decelerate);
+}
+
+#[test]
+fn an_idm_follower_brakes_for_a_crossing_ego_as_for_a_standing_leader_and_for_a_merging_one_by_its_speed(
+) {
+    // highway-env's intersection traffic: s₀ 7 m centre to centre (3.5 m from its front to
+    // the ego's passage), T 1.5 s, a 6 m/s², b 3 m/s², lanes at 10 m/s.
+    let ip = InteractionParams {
+        follower: Follower::Idm,
+        follower_min_gap_m: 3.5,
+        follower_headway_s: 1.5,
+        follower_max_accel_mps2: 6.0,
+        follower_comfort_decel_mps2: 3.0,
+        proceed_top_speed_mps: 10.0,
+        ..InteractionParams::default()
+    };
+    // The ego crosses in 1 s, 15 m ahead of the other at 8 m/s: it appears as a standing
+    // leader inside the IDM's desired gap (23 m) and the other brakes at over 9 m/s², where
+    // the kinematic rule asks 2.6 m/s² (within courtesy).
+    let crossing = pair([0.0, 10.0], [15.0, 25.0], 8.0);
+    let idm = imposed_decel(&keep(10.0), 10.0, &crossing, 0.0, &ip);
+    assert!(idm > 9.0, "{idm}");
+    let kinematic = InteractionParams {
+        follower: Follower::Kinematic,
+        ..ip
+    };
+    let b = imposed_decel(&keep(10.0), 10.0, &crossing, 0.0, &kinematic);
+    assert!((b - 2.63).abs() < 0.01, "{b}");
+    // Committed (it could not stop comfortably) or not, the IDM brakes for its leader; the
+    // kinematic rule leaves a committed car to the PET margins.
+    let mut committed = crossing;
+    committed.intent.committed = true;
+    assert!(imposed_decel(&keep(10.0), 10.0, &committed, 0.0, &ip) > 9.0);
+    assert_eq!(
+        imposed_decel(&keep(10.0), 10.0, &committed, 0.0, &kinematic),
+        0.0
+    );
+    // 60 m away it only eases off its acceleration.
+    let far = pair([0.0, 10.0], [60.0, 70.0], 8.0);
+    assert_eq!(imposed_decel(&keep(10.0), 10.0, &far, 0.0, &ip), 0.0);
+    // Merging 15 m ahead of it: at 10 m/s, pulling away, the ego makes it brake at 1.4 m/s²
+    // at most; at 4 m/s, which it closes on, at over 6.
+    let merge = ConflictPair {
+        kind: ConflictKind::Merging,
+        ..crossing
+    };
+    let ahead = imposed_decel(&keep(10.0), 10.0, &merge, 0.0, &ip);
+    assert!(ahead > 1.0 && ahead < 1.6, "{ahead}");
+    let slow = imposed_decel(&keep(4.0), 4.0, &merge, 0.0, &ip);
+    assert!(slow > 6.0, "{slow}");
+    // 3 m away, it cannot stop before the ego's passage even at 9 m/s²: no braking does.
+    let reached = pair([0.0, 10.0], [3.0, 13.0], 8.0);
+    assert_eq!(
+        imposed_decel(&keep(10.0), 10.0, &reached, 0.0, &ip),
+        f64::INFINITY
+    );
 }
 
 /// The choice stage on the paper's turn, at `speed` m/s, with the given conflicts and
