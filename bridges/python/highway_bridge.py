@@ -745,7 +745,7 @@ class OthersMonitor:
 
 
 # Who brakes for the ego, in ImposedBraking's split.
-IMPOSED_PARTS = ("queue", "regulation", "leader")
+IMPOSED_PARTS = ("queue", "regulation", "leader", "off_path")
 
 
 class ImposedBraking:
@@ -780,8 +780,12 @@ class ImposedBraking:
     * ``regulation``: any other vehicle that ``RegulatedRoad`` made yield to the ego, which
       highway-env does by setting its target speed to 0, so its IDM brakes at its 6 m/s²
       limit at once, however far it is from the conflict;
-    * ``leader``: any other vehicle that has the ego as its leader (the ego merged in front
-      of it, or it follows the ego through the junction)."""
+    * ``leader``: any other vehicle that has the ego as its leader on its own path (the ego
+      merged in front of it, or it follows the ego through the junction; ``on_path``);
+    * ``off_path``: any other vehicle whose leader search finds the ego off its path: on a
+      lane it will not take (intersection-v2 searches every lane that leaves the end of the
+      vehicle's lane, whatever its route), or driving the other way (the search matches any
+      vehicle within the lane's half width plus 1 m, whatever its heading)."""
 
     def __init__(self, approach=None):
         self.approach = approach
@@ -854,7 +858,8 @@ class ImposedBraking:
             share = min(without, 0.0) - with_ego
             if share > self.max_decel:
                 self.max_decel, self.max_decel_t = share, self.t
-            part = "queue" if self.queued(v) else "regulation" if yields else "leader"
+            part = ("queue" if self.queued(v) else "regulation" if yields
+                    else "leader" if self.on_path(v) else "off_path")
             if share > self.max_part[part]:
                 self.max_part[part] = share
                 self.max_part_at[part] = [self.t, *map(float, v.position), float(v.speed)]
@@ -871,6 +876,24 @@ class ImposedBraking:
         if ego.lane_index[0] != self.approach[1]:
             return False
         return ego.lane.local_coordinates(ego.position)[0] <= ego.LENGTH / 2
+
+
+    def on_path(self, v):
+        """Whether the ego is on the path ``v`` drives, heading its way: on its lane or the
+        next lane of its route, as highway-env's leader search matches a vehicle on a lane
+        (within the lane's half width plus 1 m), and within 90° of that lane's heading there."""
+        ego, graph = self.ego, self.road.network.graph
+        path = [v.lane_index] + [r for r in (v.route or []) if r[0] == v.lane_index[1]][:1]
+        for a, b, k in path:
+            lanes = graph.get(a, {}).get(b, [])
+            if not lanes:
+                continue
+            lane = lanes[min(k or 0, len(lanes) - 1)]
+            s, lat = lane.local_coordinates(ego.position)
+            if (lane.on_lane(ego.position, s, lat, margin=1)
+                    and abs(wrap(ego.heading - lane.heading_at(s))) < math.pi / 2):
+                return True
+        return False
 
 
 class PetTracker(PetGrid):
@@ -1016,7 +1039,8 @@ def run_episode(env, policy, name, seed, period, spec, verbose=False):
         "imposed_whole_decel_mps2": imposed.max_whole,
         # The same split by who brakes (ImposedBraking with the env's approach; None: not
         # split): followers queued behind the ego at its line, vehicles the regulation made
-        # yield to it, vehicles it leads.
+        # yield to it, vehicles it leads on their path, vehicles that brake for it off their
+        # path.
         **{f"imposed_{k}_decel_mps2": imposed.max_part[k] if imposed.approach else None
            for k in IMPOSED_PARTS},
         # When and where each part's largest braking happened: [t, x, y, speed] of the
@@ -1162,7 +1186,10 @@ def detail_lines(s):
                         for k, what in zip(IMPOSED_PARTS, (
                             "followers queued behind the ego at its line",
                             "vehicles the regulation made yield to it",
-                            "vehicles it leads (merged in front of them, or in the junction)"))))
+                            "vehicles it leads on their path (merged in front of them, or in "
+                            "the junction)",
+                            "vehicles whose leader search finds it off their path (a lane they "
+                            "do not take, or driving the other way)"))))
     if d["min"] is not None:
         lines.append(f"closest other vehicle (centre to centre): min {d['min']:.2f} m, median "
                      f"of episode minima {d['median']:.2f} m")

@@ -618,7 +618,8 @@ class Imposed(unittest.TestCase):
             self.assertGreaterEqual(imposed.max_whole, imposed.max_decel)
             # Split by who brakes: here the follower waits behind the ego on its approach.
             self.assertEqual(imposed.max_part, {"queue": imposed.max_decel if behind_ego else 0.0,
-                                                "regulation": 0.0, "leader": 0.0})
+                                                "regulation": 0.0, "leader": 0.0,
+                                                "off_path": 0.0})
             return imposed.max_decel, (10.0 - follower.speed) / 0.4, imposed.max_whole
         finally:
             env.close()
@@ -642,10 +643,50 @@ class Imposed(unittest.TestCase):
             road.vehicles = [ego, follower]
             imposed = _imposed_over_one_step(hb, env, u)
             self.assertGreater(imposed.max_decel, 3.0)
-            self.assertEqual(imposed.max_part,
-                             {"queue": 0.0, "regulation": 0.0, "leader": imposed.max_decel})
+            self.assertEqual(imposed.max_part, {"queue": 0.0, "regulation": 0.0,
+                                                "leader": imposed.max_decel, "off_path": 0.0})
         finally:
             env.close()
+
+    def _ego_ahead_of_a_car(self, name, lane_index, s, reverse, car_s):
+        """The ego standing ``s`` m into ``lane_index`` (turned round with ``reverse``) and an
+        IDM car ``car_s`` m into the north approach at 10 m/s going straight on (south, its
+        next lane ("ir2", "il0")), after one step: the imposed braking's split."""
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+        from highway_env.vehicle.behavior import IDMVehicle
+
+        env, u = _standing_ego(hb, name)
+        try:
+            road, ego = u.road, u.vehicle
+            lane = road.network.get_lane(lane_index)
+            ego.position = lane.position(s, 0.0)
+            ego.heading = lane.heading_at(s) + (math.pi if reverse else 0.0)
+            ego.lane_index, ego.lane = lane_index, lane
+            car = IDMVehicle.make_on_lane(road, ("o2", "ir2", 0), car_s, speed=10.0)
+            car.plan_route_to("o0")
+            road.vehicles = [ego, car]
+            return _imposed_over_one_step(hb, env, u).max_part
+        finally:
+            env.close()
+
+    def test_a_car_braking_for_the_ego_off_its_path_counts_apart(self):
+        """intersection-v2 finds a leader on every lane that leaves the end of a car's lane:
+        a car going straight on brakes as hard for the ego standing 8 m into the right turn
+        from its approach, which it does not take, as for the ego 8 m into its own straight
+        lane; only the second is a leader on its path (the car 92 m into its approach, 16 m
+        behind). On intersection-v0 the car brakes for the ego standing 14 m ahead on its own
+        approach turned round (a car driving the other way) as for one facing its way: off
+        its path, and on it."""
+        for name, lane, s, reverse, car_s, part in (
+                ("intersection-v2", ("ir2", "il1", 0), 8.0, False, 92.0, "off_path"),
+                ("intersection-v2", ("ir2", "il0", 0), 8.0, False, 92.0, "leader"),
+                ("intersection-v0", ("o2", "ir2", 0), 80.0, True, 66.0, "off_path"),
+                ("intersection-v0", ("o2", "ir2", 0), 80.0, False, 66.0, "leader")):
+            with self.subTest(name=name, lane=lane, reverse=reverse):
+                split = self._ego_ahead_of_a_car(name, lane, s, reverse, car_s)
+                self.assertGreater(split[part], 3.0, split)
+                self.assertEqual([k for k, b in split.items() if b > 0.0], [part])
 
     def test_a_car_the_regulation_makes_yield_to_the_ego_counts_apart(self):
         """A car on the opposite approach at 8 m/s that ``RegulatedRoad`` made yield to the
@@ -666,8 +707,8 @@ class Imposed(unittest.TestCase):
             road.vehicles = [ego, other]
             imposed = _imposed_over_one_step(hb, env, u)
             self.assertGreater(imposed.max_decel, 5.0)
-            self.assertEqual(imposed.max_part,
-                             {"queue": 0.0, "regulation": imposed.max_decel, "leader": 0.0})
+            self.assertEqual(imposed.max_part, {"queue": 0.0, "regulation": imposed.max_decel,
+                                                "leader": 0.0, "off_path": 0.0})
             # Recorded where it braked: on the opposite approach, at its speed then.
             t, x, y, speed = imposed.max_part_at["regulation"]
             self.assertEqual(t, 0.2)
