@@ -784,8 +784,9 @@ class ImposedBraking:
       merged in front of it, or it follows the ego through the junction; ``on_path``);
     * ``off_path``: any other vehicle whose leader search finds the ego off its path: on a
       lane it will not take (intersection-v2 searches every lane that leaves the end of the
-      vehicle's lane, whatever its route), or driving the other way (the search matches any
-      vehicle within the lane's half width plus 1 m, whatever its heading)."""
+      vehicle's lane, whatever its route), or driving the other way, more than 135° off the
+      lane's heading (the search matches any vehicle within the lane's half width plus 1 m,
+      whatever its heading)."""
 
     def __init__(self, approach=None):
         self.approach = approach
@@ -881,7 +882,8 @@ class ImposedBraking:
     def on_path(self, v):
         """Whether the ego is on the path ``v`` drives, heading its way: on its lane or the
         next lane of its route, as highway-env's leader search matches a vehicle on a lane
-        (within the lane's half width plus 1 m), and within 90° of that lane's heading there."""
+        (within the lane's half width plus 1 m), and not driving the other way: within 135° of
+        that lane's heading there (an ego crossing in front, about 90° off, is on the path)."""
         ego, graph = self.ego, self.road.network.graph
         path = [v.lane_index] + [r for r in (v.route or []) if r[0] == v.lane_index[1]][:1]
         for a, b, k in path:
@@ -891,7 +893,7 @@ class ImposedBraking:
             lane = lanes[min(k or 0, len(lanes) - 1)]
             s, lat = lane.local_coordinates(ego.position)
             if (lane.on_lane(ego.position, s, lat, margin=1)
-                    and abs(wrap(ego.heading - lane.heading_at(s))) < math.pi / 2):
+                    and abs(wrap(ego.heading - lane.heading_at(s))) < 0.75 * math.pi):
                 return True
         return False
 
