@@ -24,7 +24,7 @@ use concord_core::{DecisionCore, Params};
 use concord_ipc::clock::now_ns;
 use concord_ipc::core_service::{self, Geometry, RunConfig, ServiceConfig, StopAfter};
 use concord_ipc::system::RealtimeConfig;
-use concord_ipc::wire::{FrameReject, IntentText, SceneFrame, TextSource, WireAdvice};
+use concord_ipc::wire::{CoreStats, FrameReject, IntentText, SceneFrame, TextSource, WireAdvice};
 use concord_ipc::{iox, services};
 use concord_map::paper;
 use concord_sidecar::config::SidecarConfig;
@@ -281,33 +281,13 @@ fn a_running_core_counts_every_bad_frame_and_decides_the_good_ones_after() {
             phase.store(3, Ordering::SeqCst);
         })
     };
-    let cfg = ServiceConfig {
-        prefix,
-        rate_hz: 200.0,
-        print_period_s: 0.0,
-        staleness_s: STALENESS_S,
-        ..ServiceConfig::default()
-    };
-    let mut core = Box::new(paper_core());
     let mut at_good = None;
-    let stats = core_service::run_observed(
-        &mut core,
-        &cfg,
-        None,
-        &RealtimeConfig::default(),
-        &config,
-        StopAfter {
-            ticks: None,
-            duration_s: Some(15.0),
-        },
-        |s| {
-            if phase.load(Ordering::SeqCst) == 1 && at_good.is_none() {
-                at_good = Some(*s);
-                phase.store(2, Ordering::SeqCst);
-            }
-        },
-    );
-    let stats = stats.expect("the loop runs");
+    let stats = run_paper_core(prefix, &config, 15.0, |s| {
+        if phase.load(Ordering::SeqCst) == 1 && at_good.is_none() {
+            at_good = Some(*s);
+            phase.store(2, Ordering::SeqCst);
+        }
+    });
     sender.join().unwrap();
     assert_eq!(
         phase.load(Ordering::SeqCst),
@@ -388,25 +368,7 @@ fn a_corrupt_frame_is_refused_for_its_content_and_does_not_reorder_the_source() 
             }
         })
     };
-    let cfg = ServiceConfig {
-        prefix,
-        rate_hz: 200.0,
-        print_period_s: 0.0,
-        staleness_s: STALENESS_S,
-        ..ServiceConfig::default()
-    };
-    let stats = core_service::run(
-        &mut paper_core(),
-        &cfg,
-        None,
-        &RealtimeConfig::default(),
-        &config,
-        StopAfter {
-            ticks: None,
-            duration_s: Some(1.8),
-        },
-    )
-    .expect("the loop runs");
+    let stats = run_paper_core(prefix, &config, 1.8, |_| {});
     sender.join().unwrap();
     let mut refused = [0; 5];
     refused[FrameReject::NotFinite as usize] = 1;
@@ -419,8 +381,38 @@ fn a_corrupt_frame_is_refused_for_its_content_and_does_not_reorder_the_source() 
     assert_eq!(stats.publisher_restarts, 0);
 }
 
-/// The core's staleness window in this test, s.
+/// The core's staleness window in the running-core tests, s.
 const STALENESS_S: f64 = 0.3;
+
+/// Runs the core process on the paper's junction at 200 Hz under `prefix` for `duration_s`,
+/// `observe` seeing its counters each tick: its final counters.
+fn run_paper_core(
+    prefix: String,
+    config: &iceoryx2::config::Config,
+    duration_s: f64,
+    observe: impl FnMut(&CoreStats),
+) -> CoreStats {
+    let cfg = ServiceConfig {
+        prefix,
+        rate_hz: 200.0,
+        print_period_s: 0.0,
+        staleness_s: STALENESS_S,
+        ..ServiceConfig::default()
+    };
+    core_service::run_observed(
+        &mut paper_core(),
+        &cfg,
+        None,
+        &RealtimeConfig::default(),
+        config,
+        StopAfter {
+            ticks: None,
+            duration_s: Some(duration_s),
+        },
+        observe,
+    )
+    .expect("the loop runs")
+}
 
 fn random_value(rng: &mut SmallRng) -> toml::Value {
     use toml::Value::*;

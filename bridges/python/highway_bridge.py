@@ -878,7 +878,6 @@ class ImposedBraking:
             return False
         return ego.lane.local_coordinates(ego.position)[0] <= ego.LENGTH / 2
 
-
     def on_path(self, v):
         """Whether the ego is on the path ``v`` drives, heading its way: on its lane or the
         next lane of its route, as highway-env's leader search matches a vehicle on a lane

@@ -648,9 +648,8 @@ class Imposed(unittest.TestCase):
         finally:
             env.close()
 
-    def _ego_ahead_of_a_car(self, name, lane_index, s, reverse, car_s):
-        """The ego standing ``s`` m into ``lane_index`` (turned round with ``reverse`` True,
-        across it, 1.6 rad off its heading, with "across") and an
+    def _ego_ahead_of_a_car(self, name, lane_index, s, turn, car_s):
+        """The ego standing ``s`` m into ``lane_index``, ``turn`` rad off its heading, and an
         IDM car ``car_s`` m into the north approach at 10 m/s going straight on (south, its
         next lane ("ir2", "il0")), after one step: the imposed braking's split."""
         sys.path.insert(0, HERE)
@@ -662,7 +661,7 @@ class Imposed(unittest.TestCase):
             road, ego = u.road, u.vehicle
             lane = road.network.get_lane(lane_index)
             ego.position = lane.position(s, 0.0)
-            ego.heading = lane.heading_at(s) + {True: math.pi, "across": 1.6}.get(reverse, 0.0)
+            ego.heading = lane.heading_at(s) + turn
             ego.lane_index, ego.lane = lane_index, lane
             car = IDMVehicle.make_on_lane(road, ("o2", "ir2", 0), car_s, speed=10.0)
             car.plan_route_to("o0")
@@ -679,14 +678,14 @@ class Imposed(unittest.TestCase):
         behind). On intersection-v0 the car brakes for the ego standing 14 m ahead on its own
         approach turned round (a car driving the other way) as for one facing its way or
         standing across its lane: off its path, and on it."""
-        for name, lane, s, reverse, car_s, part in (
-                ("intersection-v2", ("ir2", "il1", 0), 8.0, False, 92.0, "off_path"),
-                ("intersection-v2", ("ir2", "il0", 0), 8.0, False, 92.0, "leader"),
-                ("intersection-v0", ("o2", "ir2", 0), 80.0, True, 66.0, "off_path"),
-                ("intersection-v0", ("o2", "ir2", 0), 80.0, False, 66.0, "leader"),
-                ("intersection-v0", ("o2", "ir2", 0), 80.0, "across", 66.0, "leader")):
-            with self.subTest(name=name, lane=lane, reverse=reverse):
-                split = self._ego_ahead_of_a_car(name, lane, s, reverse, car_s)
+        for name, lane, s, turn, car_s, part in (
+                ("intersection-v2", ("ir2", "il1", 0), 8.0, 0.0, 92.0, "off_path"),
+                ("intersection-v2", ("ir2", "il0", 0), 8.0, 0.0, 92.0, "leader"),
+                ("intersection-v0", ("o2", "ir2", 0), 80.0, math.pi, 66.0, "off_path"),
+                ("intersection-v0", ("o2", "ir2", 0), 80.0, 0.0, 66.0, "leader"),
+                ("intersection-v0", ("o2", "ir2", 0), 80.0, 1.6, 66.0, "leader")):
+            with self.subTest(name=name, lane=lane, turn=turn):
+                split = self._ego_ahead_of_a_car(name, lane, s, turn, car_s)
                 self.assertGreater(split[part], 3.0, split)
                 self.assertEqual([k for k, b in split.items() if b > 0.0], [part])
 
