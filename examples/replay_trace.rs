@@ -105,6 +105,10 @@ fn main() {
             d.p_corrected,
             ch.safety
         );
+        println!(
+            "   attributes [match, safety, efficiency] {:.2?} utility {:.2?} D_prev {:.2?} corrected {:.2?}",
+            ch.attributes, ch.utility, ch.d_prev, ch.utility_corrected
+        );
         let pts = d.trajectory.points();
         println!(
             "   plan l at 0/0.5/1/2 s: {:.2?}",

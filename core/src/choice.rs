@@ -176,8 +176,12 @@ pub struct EgoContext {
     pub yield_check_s: f64,
 }
 
-/// Below this speed the ego counts as stopped for the idle penalty, m/s.
+/// Below this speed the ego counts as stopped for the idle penalty (and below
+/// `creep_speed_mps` as creeping), m/s.
 const IDLE_SPEED_MPS: f64 = 0.1;
+/// A profile whose target speed is this far below the speed the ego may keep slows it, for
+/// the idle penalty, m/s.
+const SLOWING_MPS: f64 = 0.5;
 /// A yielding ego more than this short of its yield point and too far to reach it with one
 /// stopping polynomial approaches it (see [`profile`]), m.
 const CREEP_FROM_M: f64 = 1.0;
@@ -407,16 +411,22 @@ fn time_to_cover(v: f64, a: f64, v_top: f64, d: f64) -> f64 {
 /// The other's occupancy of its passage if it proceeds, [enter, exit] in s from now: it
 /// enters at the earliest when accelerating at its shown acceleration or
 /// `proceed_accel_mps2`, whichever is higher, up to `proceed_top_speed_mps`, and leaves at the
-/// latest when holding its speed (at least `proceed_min_speed_mps`).
+/// latest when holding its speed (at least `proceed_min_speed_mps`). A passage it has already
+/// entered or left was entered or left that long ago at that speed: negative times.
 pub fn proceeding_interval(c: &ConflictPair, ip: &InteractionParams) -> (f64, f64) {
     let v = c.agent_speed_mps;
     let a = c.agent_accel_mps2.max(ip.proceed_accel_mps2);
     let top = ip.proceed_top_speed_mps;
     let [d_in, d_out] = c.agent_pass_m;
-    let t_in = time_to_cover(v, a, top, d_in);
-    let t_out =
-        time_to_cover(v, a, top, d_out).max(d_out.max(0.0) / v.max(ip.proceed_min_speed_mps));
-    (t_in, t_out)
+    let held = v.max(ip.proceed_min_speed_mps);
+    let at = |d: f64| {
+        if d < 0.0 {
+            d / held
+        } else {
+            time_to_cover(v, a, top, d)
+        }
+    };
+    (at(d_in), at(d_out).max(d_out / held))
 }
 
 /// The ego's occupancy of its passage under `profile` from speed `v0`, [enter, exit] in s
@@ -779,25 +789,41 @@ pub fn choose(
         .leader
         .map(|l| idm_accel(ctx.speed, l.gap_m, ctx.speed - l.speed_mps, p));
     let pairs = conflicts.pairs();
-    // Stopped with no reason to wait: nothing to yield to, or a maneuver of the route that
-    // goes at its nominal timing is free of risk and imposes nothing; and free to move off
-    // (no leader, or one IDM would follow).
+    // Every conflict free: a maneuver of the route that goes at its nominal timing (speeds up,
+    // or takes the turn at the curve's speed) is free of risk and imposes nothing. "Keep speed"
+    // does not count: at a crawl it passes behind everyone as surely as yielding does.
     let free_to_go = || {
-        Maneuver::ALL
-            .into_iter()
-            .filter(|m| *m != Maneuver::Decelerate && m.consistent_with(ctx.route))
-            .map(|m| profile(m, ctx, p))
-            .filter(|prof| prof.target_speed >= 1.0)
-            .any(|prof| {
-                pairs.iter().zip(yields).all(|(c, &y)| {
-                    conflict_risk(&prof, ctx.speed, c, y, ip) < 0.01
-                        && imposed_decel(&prof, ctx.speed, c, y, ip) <= ip.max_imposed_decel_mps2
-                })
+        [
+            Maneuver::Accelerate,
+            Maneuver::TurnLeft,
+            Maneuver::TurnRight,
+        ]
+        .into_iter()
+        .filter(|m| m.consistent_with(ctx.route))
+        .map(|m| profile(m, ctx, p))
+        .filter(|prof| prof.target_speed >= 1.0)
+        .any(|prof| {
+            pairs.iter().zip(yields).all(|(c, &y)| {
+                conflict_risk(&prof, ctx.speed, c, y, ip) < 0.01
+                    && imposed_decel(&prof, ctx.speed, c, y, ip) <= ip.max_imposed_decel_mps2
             })
+        })
     };
-    let idle = ctx.speed < IDLE_SPEED_MPS
-        && a_idm.is_none_or(|a| a > 0.0)
-        && (ctx.yield_distance.is_infinite() || free_to_go());
+    // No reason to wait or slow: no leader that IDM would brake for, and nothing to yield to
+    // or every conflict free. Then a profile that stops, creeps (below `creep_speed_mps`),
+    // yields, or slows below the speed the ego may keep (its own, the desired speed and the
+    // speed cap, whichever is lowest) is penalised, at any speed: the history terms of eq.
+    // 12–14 would otherwise hold the ego in "decelerate" down to a standstill, or in "keep
+    // speed" at a crawl, once the last conflict is gone.
+    let idle = a_idm.is_none_or(|a| a > 0.0) && (ctx.yield_distance.is_infinite() || free_to_go());
+    let keep = ctx.speed.min(p.desired_speed_mps).min(ctx.speed_cap);
+    let slows = |prof: &Profile| {
+        prof.yields()
+            || prof.target_speed
+                < IDLE_SPEED_MPS
+                    .max(ip.creep_speed_mps)
+                    .max(keep - SLOWING_MPS)
+    };
     let wait = expected_wait(pairs, yields, opm, ip);
     for m in Maneuver::ALL {
         let i = m.index();
@@ -824,7 +850,7 @@ pub fn choose(
             if !m.consistent_with(ctx.route) {
                 matching -= p.navigation_penalty;
             }
-            if idle && (prof.target_speed < IDLE_SPEED_MPS || prof.yields()) {
+            if idle && slows(&prof) {
                 matching -= p.idle_penalty;
             }
             let (mut risk, mut imposed) = (0.0_f64, 0.0_f64);

@@ -79,12 +79,14 @@ pub struct ChoiceParams {
     pub lambda: f64,
     /// Penalty on a turn against the navigation instruction (matching degree).
     pub navigation_penalty: f64,
-    /// Penalty on waiting without a reason (matching degree): a maneuver that keeps a stopped
-    /// ego standing, or yielding, when no leader holds it back and nothing requires it: no
-    /// conflict to yield to, or every conflicting road user lets it go (a maneuver of its route
-    /// is free of risk and imposes nothing). Without it the history terms of eq. 12–14 keep a
-    /// stopped ego in "decelerate" once the reason to wait is gone, since its scene state, and
-    /// so D_prev, no longer changes.
+    /// Penalty on waiting or slowing without a reason (matching degree): a maneuver that stops
+    /// the ego, keeps it standing or creeping (below `interaction.creep_speed_mps`), yields,
+    /// or slows it more than 0.5 m/s below the lowest of its speed, the desired speed and the
+    /// speed cap, when no leader holds it back and nothing requires it: no conflict to yield
+    /// to, or every conflicting road user lets it go (speeding up or taking the route's turn
+    /// is free of risk and imposes nothing). Without it the history terms of eq. 12–14 (γ + λ)
+    /// keep the ego in "decelerate", or in "keep speed" at a crawl, once the reason to wait is
+    /// gone.
     pub idle_penalty: f64,
     /// Gain of the IDM car-following penalty, per m/s² of excess acceleration.
     pub idm_penalty_gain: f64,

@@ -395,11 +395,21 @@ fn an_idm_follower_brakes_for_a_crossing_ego_as_for_a_standing_leader_and_for_a_
 /// The choice stage on the paper's turn, at `speed` m/s, with the given conflicts and
 /// probabilities that each other lets the ego go first.
 fn choose_with(pairs: &[ConflictPair], yields: &[f64], speed: f64) -> ChoiceOutcome {
-    let p = Params::default();
+    choose_with_params(pairs, yields, speed, 0.5, &Params::default())
+}
+
+/// [`choose_with`] with its yield point `yield_m` m ahead, under `p`.
+fn choose_with_params(
+    pairs: &[ConflictPair],
+    yields: &[f64],
+    speed: f64,
+    yield_m: f64,
+    p: &Params,
+) -> ChoiceOutcome {
     let ctx = EgoContext {
         speed,
         speed_cap: 10.0,
-        yield_distance: 0.5,
+        yield_distance: yield_m,
         goal_distance: pairs[0].ego_zone_m[1],
         route: concord_core::scene::Turn::Left,
         max_brake: p.trajectory.max_brake_mps2,
@@ -1246,4 +1256,187 @@ fn an_ego_that_crept_just_past_its_waiting_point_waits_there() {
             c.zone_a[0]
         );
     }
+}
+
+/// The choice of a moving ego on a free road (nothing to yield to, no leader) at `speed` m/s,
+/// under `choice`, whose last 2 s were all `held` in the same state (eq. 12–14).
+fn held_on_a_free_road(
+    held: Maneuver,
+    speed: f64,
+    speed_cap: f64,
+    goal_m: f64,
+    choice: ChoiceParams,
+) -> ChoiceOutcome {
+    let p = Params {
+        choice,
+        ..Params::default()
+    };
+    let ctx = EgoContext {
+        speed,
+        speed_cap,
+        yield_distance: f64::INFINITY,
+        goal_distance: goal_m,
+        route: concord_core::scene::Turn::Straight,
+        max_brake: p.trajectory.max_brake_mps2,
+        min_duration: p.trajectory.min_duration_s,
+        max_duration: p.trajectory.max_duration_s,
+        yield_check_s: p.trajectory.yield_check_s,
+        ..EgoContext::default()
+    };
+    let triplet = OpmTriplet::default();
+    let state = concord_core::choice::state_features(&triplet, &ctx, &p.opm, &p.choice);
+    let mut history = ChoiceHistory::default();
+    for k in 0..20 {
+        history.record(0.1 * k as f64, state, held);
+    }
+    let mut out = ChoiceOutcome::default();
+    choose(
+        &triplet,
+        &ConflictSet::of(&[]),
+        &[],
+        &ctx,
+        &history,
+        &p.opm,
+        &p.interaction,
+        &p.choice,
+        &mut out,
+    );
+    out
+}
+
+/// The merge of highway-env's merge-v0 after the merging car has joined ahead: the ego, at
+/// 11 m/s after slowing for it, has nothing left to yield to and no leader it would brake
+/// for, on a road whose desired speed is 30 m/s; the history favours "decelerate".
+fn after_the_merge(idle_penalty: f64) -> ChoiceOutcome {
+    let choice = ChoiceParams {
+        desired_speed_mps: 30.0,
+        reference_speed_mps: 20.0,
+        idle_penalty,
+        ..ChoiceParams::default()
+    };
+    held_on_a_free_road(Maneuver::Decelerate, 11.0, 30.0, 100.0, choice)
+}
+
+#[test]
+fn a_moving_ego_stops_slowing_once_nothing_holds_it_back() {
+    let out = after_the_merge(ChoiceParams::default().idle_penalty);
+    assert_ne!(out.choice, Maneuver::Decelerate, "{:?}", out.p_corrected);
+    // Only "decelerate" slows it: the maneuvers that keep or gain speed are not penalised.
+    let free = after_the_merge(0.0);
+    for m in [Maneuver::Accelerate, Maneuver::KeepSpeed] {
+        assert_eq!(out.utility[m.index()], free.utility[m.index()], "{m:?}");
+    }
+    assert!(out.utility[Maneuver::Decelerate.index()] < free.utility[Maneuver::Decelerate.index()]);
+    // Without the penalty the history holds it in "decelerate", which takes it to a standstill.
+    assert_eq!(free.choice, Maneuver::Decelerate, "{:?}", free.p_corrected);
+}
+
+#[test]
+fn a_car_that_has_left_its_passage_holds_the_margin_behind_it_until_it_has_run_out() {
+    let ip = InteractionParams::default();
+    // It left its passage 3.3 m ago at 6.6 m/s: 0.5 s ago.
+    let left = pair([0.0, 0.0], [-13.3, -3.3], 6.6);
+    let (enter, exit) = concord_core::choice::proceeding_interval(&left, &ip);
+    assert!(
+        (exit + 0.5).abs() < 1e-9 && (enter + 13.3 / 6.6).abs() < 1e-9,
+        "{enter} {exit}"
+    );
+    // Entering at 0.8 s is 1.3 s behind it, short of pet_behind_s (1.6 s); at 1.2 s, 1.7 s.
+    let at = |d: f64| {
+        conflict_risk(
+            &keep(10.0),
+            10.0,
+            &pair([d, d + 10.0], [-13.3, -3.3], 6.6),
+            0.0,
+            &ip,
+        )
+    };
+    assert!(at(8.0) > 0.01, "{}", at(8.0));
+    assert_eq!(at(12.0), 0.0);
+
+    // In the core: the paper's HDV 1 m past its passage at 8 m/s (0.125 s ago) is still a
+    // conflict, though no longer a risky one (its TTC is 0, the ego's 2.5 s: ΔTTC is below
+    // ΔT_th); 14 m past (1.75 s ago), none.
+    // The conflict with the paper's HDV at `s_hdv` m along its lane, 8 m/s, the CAV 20 m
+    // before the crossing at 8 m/s, and the HDV's conflict point along its lane.
+    let conflict_at = |s_hdv: Option<f64>| {
+        let mut core = paper_core(Params::default());
+        let m = *core.morphology();
+        let (s_cav, s_point) = m
+            .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
+            .unwrap();
+        let (cav, h_cav, _) = m.lane(paper::CAV_LEFT).pose_at(s_cav - 20.0, 0);
+        let s_hdv = s_hdv.unwrap_or(s_point - 20.0);
+        let (hdv, h_hdv, _) = m.lane(paper::HDV_STRAIGHT).pose_at(s_hdv, 0);
+        let mut scene = Scene::new(0.0, AgentState::moving(0, cav, h_cav, 8.0), paper::CAV_LEFT);
+        scene.push(AgentState::moving(1, hdv, h_hdv, 8.0));
+        core.step(&scene, 0.0, None).unwrap();
+        (core.conflicts().pairs().first().copied(), s_hdv)
+    };
+    // Where the HDV leaves its passage, from 20 m before the crossing.
+    let pass_exit = match conflict_at(None) {
+        (Some(c), s) => s + c.agent_pass_m[1],
+        (None, _) => panic!("a conflict before the crossing"),
+    };
+    let past = |beyond: f64| conflict_at(Some(pass_exit + beyond)).0;
+    let just_left = past(1.0).expect("still in conflict 0.125 s after it left");
+    assert!((just_left.agent_pass_m[1] + 1.0).abs() < 1e-6);
+    assert!(!just_left.is_risky(&OpmParams::default()));
+    assert!(past(14.0).is_none());
+}
+
+/// `held_on_a_free_road` at the defaults (desired speed 13.9 m/s) with `idle_penalty`.
+fn held_in(held: Maneuver, speed: f64, idle_penalty: f64) -> ChoiceOutcome {
+    let choice = ChoiceParams {
+        idle_penalty,
+        ..ChoiceParams::default()
+    };
+    held_on_a_free_road(held, speed, 13.9, 50.0, choice)
+}
+
+#[test]
+fn an_ego_creeping_with_nothing_to_wait_for_speeds_up() {
+    // At 0.5 m/s "keep speed" is a creep (below creep_speed_mps, 1 m/s): penalised like a
+    // wait, so the history no longer holds it there.
+    let crawl = held_in(
+        Maneuver::KeepSpeed,
+        0.5,
+        ChoiceParams::default().idle_penalty,
+    );
+    assert_ne!(crawl.choice, Maneuver::KeepSpeed, "{:?}", crawl.p_corrected);
+    let held = held_in(Maneuver::KeepSpeed, 0.5, 0.0);
+    assert_eq!(held.choice, Maneuver::KeepSpeed, "{:?}", held.p_corrected);
+    // At 8 m/s keeping speed is driving, not waiting: not penalised.
+    let driving = held_in(
+        Maneuver::KeepSpeed,
+        8.0,
+        ChoiceParams::default().idle_penalty,
+    );
+    let free = held_in(Maneuver::KeepSpeed, 8.0, 0.0);
+    let k = Maneuver::KeepSpeed.index();
+    assert_eq!(driving.utility[k], free.utility[k]);
+}
+
+#[test]
+fn a_crawl_that_passes_behind_everyone_does_not_make_the_way_free() {
+    // At 1.2 m/s, 20 m before its passage, with a car arriving at its own: holding the crawl
+    // passes behind it, speeding up or turning does not. That is no reason to stop waiting:
+    // "decelerate" is not penalised.
+    let c = pair([20.0, 30.0], [20.0, 30.0], 8.0);
+    let judged = |idle_penalty: f64| {
+        let p = Params {
+            choice: ChoiceParams {
+                idle_penalty,
+                ..ChoiceParams::default()
+            },
+            ..Params::default()
+        };
+        choose_with_params(&[c], &[0.0], 1.2, 19.0, &p)
+    };
+    let with = judged(ChoiceParams::default().idle_penalty);
+    let without = judged(0.0);
+    let (k, d) = (Maneuver::KeepSpeed.index(), Maneuver::Decelerate.index());
+    assert_eq!(with.safety[k], 1.0, "the crawl passes behind");
+    assert!(with.safety[Maneuver::TurnLeft.index()] < 0.99);
+    assert_eq!(with.utility[d], without.utility[d]);
 }

@@ -731,7 +731,7 @@ mod tests {
         assert!(GapAcceptance::new(8.0).act(&w, &drivers(&w)).accel < -2.0);
     }
 
-    /// Always advises decelerating, confidently, after `latency` s.
+    /// Always advises the route's left turn, confidently, after `latency` s.
     struct Constant(f64);
 
     impl AdviceSource for Constant {
@@ -741,7 +741,7 @@ mod tests {
             _: &Decision,
             _: &World,
         ) -> Option<(Maneuver, f64, f64)> {
-            Some((Maneuver::Decelerate, 0.9, self.0))
+            Some((Maneuver::TurnLeft, 0.9, self.0))
         }
     }
 
