@@ -255,18 +255,19 @@ pub fn build(
                 let own = |s: f64| s - process.s_m;
                 let ego_zone = cp.zone_a.map(rel);
                 let agent_zone = cp.zone_b.map(own);
-                // A road user that has left its zone stays in conflict until `pet_behind_s`
-                // after it left its passage (at its speed, at least 0.1 m/s): the margin the
-                // ego keeps behind it (`choice::conflict_risk`, the planner's margins) holds
-                // until then, while the ego can still stop before its own passage braking at
-                // `comfort_decel_mps2` (a committed ego planned that margin before the car
-                // left, on its predicted exit).
+                // A road user that has crossed the ego's lane and left its zone stays in
+                // conflict until `pet_behind_s` after it left its passage (at its speed, at
+                // least 0.1 m/s): the margin the ego keeps behind it (`choice::conflict_risk`,
+                // the planner's margins) holds until then, while the ego can still stop before
+                // its own passage braking at `comfort_decel_mps2` (a committed ego planned that
+                // margin before the car left, on its predicted exit). One that merged into the
+                // ego's lane ahead is its leader: car following keeps that distance.
                 let left_s = -own(cp.pass_b[1]) / process.speed_mps.max(0.1);
                 let committed =
                     ego_speed * ego_speed / (2.0 * ip.comfort_decel_mps2) > rel(cp.pass_a[0]);
-                if ego_zone[1] < 0.0
-                    || (agent_zone[1] < 0.0 && (left_s >= ip.pet_behind_s || committed))
-                {
+                let gone =
+                    left_s >= ip.pet_behind_s || committed || cp.kind != ConflictKind::Crossing;
+                if ego_zone[1] < 0.0 || (agent_zone[1] < 0.0 && gone) {
                     return None;
                 }
                 let (d_e, d_a) = (rel(cp.s_a), own(cp.s_b));
