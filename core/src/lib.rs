@@ -694,7 +694,7 @@ impl DecisionCore {
     fn yield_point(&self, s: f64, v: f64) -> (f64, f64, bool) {
         let p = &self.params;
         let margin = p.trajectory.stop_margin_m;
-        let reach = v * v / (2.0 * p.interaction.comfort_decel_mps2);
+        let reach = p.interaction.comfort_stop_m(v);
         // A stop point up to the margin behind the ego still keeps it out of the zone: it stops
         // where it is (a creep that overshot a point by a centimetre must not turn into
         // clearing the junction).

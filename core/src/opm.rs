@@ -263,8 +263,7 @@ pub fn build(
                 // margin before the car left, on its predicted exit). One that merged into the
                 // ego's lane ahead is its leader: car following keeps that distance.
                 let left_s = -own(cp.pass_b[1]) / process.speed_mps.max(0.1);
-                let committed =
-                    ego_speed * ego_speed / (2.0 * ip.comfort_decel_mps2) > rel(cp.pass_a[0]);
+                let committed = ip.comfort_stop_m(ego_speed) > rel(cp.pass_a[0]);
                 let gone =
                     left_s >= ip.pet_behind_s || committed || cp.kind != ConflictKind::Crossing;
                 if ego_zone[1] < 0.0 || (agent_zone[1] < 0.0 && gone) {

@@ -245,6 +245,14 @@ pub enum Follower {
     Idm,
 }
 
+impl InteractionParams {
+    /// Distance to stop from `v` m/s braking at `comfort_decel_mps2`, m: nearer than that, a
+    /// road user can no longer stop comfortably (it is committed).
+    pub fn comfort_stop_m(&self, v: f64) -> f64 {
+        v * v / (2.0 * self.comfort_decel_mps2)
+    }
+}
+
 impl Default for InteractionParams {
     fn default() -> Self {
         Self {

@@ -6,21 +6,20 @@
 
 use concord_core::DecisionSource;
 use concord_core::Params;
-use concord_sim::experiment::{interaction_grid, paper_grid, run_episode, ControllerKind};
-use concord_sim::metrics::Metrics;
+use concord_sim::experiment::{interaction_grid, paper_grid, run_episode, ControllerKind, Episode};
 use concord_sim::world::ScenarioKind;
 
-fn episode(scenario: ScenarioKind, speed: f64, rep: u32) -> Metrics {
-    let e = interaction_grid(30, 1)
-        .into_iter()
+/// Concord logit-only's episode of `grid` (tuning seed 1) in `scenario` at `speed` m/s,
+/// repetition `rep`.
+fn cell(grid: Vec<Episode>, scenario: ScenarioKind, speed: f64, rep: u32) -> Episode {
+    grid.into_iter()
         .find(|e| {
             e.scenario == scenario
                 && e.speed == speed
                 && e.rep == rep
                 && e.controller == ControllerKind::ConcordLogit
         })
-        .expect("the grid has the cell");
-    run_episode(&e, &Params::default()).metrics
+        .expect("the grid has the cell")
 }
 
 #[test]
@@ -29,7 +28,8 @@ fn the_ego_keeps_its_margin_behind_a_car_that_has_left_the_zone() {
         (ScenarioKind::Stream, 8.0, 3),
         (ScenarioKind::LeftTurnPriority, 10.0, 7),
     ] {
-        let m = episode(scenario, speed, rep);
+        let e = cell(interaction_grid(30, 1), scenario, speed, rep);
+        let m = run_episode(&e, &Params::default()).metrics;
         assert!(m.success && !m.collision, "{scenario:?} {speed} {rep}");
         assert!(
             m.pet_s >= 1.5,
@@ -46,7 +46,10 @@ fn the_ego_keeps_its_margin_behind_a_car_that_has_left_the_zone() {
 /// (the minimum-risk fallback) and a PET that already met the target.
 #[test]
 fn a_committed_ego_is_not_held_to_the_margin_after_the_car_has_left() {
-    let out = run_episode(&paper(ScenarioKind::LeftTurn, 0), &Params::default());
+    let out = run_episode(
+        &cell(paper_grid(30, 1), ScenarioKind::LeftTurn, 6.0, 0),
+        &Params::default(),
+    );
     assert!(
         out.metrics.success && out.metrics.pet_s >= 1.5,
         "{:?}",
@@ -61,7 +64,10 @@ fn a_committed_ego_is_not_held_to_the_margin_after_the_car_has_left() {
 #[test]
 fn a_car_that_merged_ahead_is_followed_not_kept_a_margin_from() {
     for rep in [0, 5, 7] {
-        let out = run_episode(&paper(ScenarioKind::Merge, rep), &Params::default());
+        let out = run_episode(
+            &cell(paper_grid(30, 1), ScenarioKind::Merge, 6.0, rep),
+            &Params::default(),
+        );
         assert!(out.metrics.success && !out.metrics.collision, "rep {rep}");
         assert_eq!(
             out.sources[DecisionSource::MinimumRisk as usize],
@@ -69,17 +75,4 @@ fn a_car_that_merged_ahead_is_followed_not_kept_a_margin_from() {
             "rep {rep}"
         );
     }
-}
-
-/// Concord logit-only at 6 m/s in the paper's grid, tuning seed, repetition `rep`.
-fn paper(scenario: ScenarioKind, rep: u32) -> concord_sim::experiment::Episode {
-    paper_grid(30, 1)
-        .into_iter()
-        .find(|e| {
-            e.scenario == scenario
-                && e.speed == 6.0
-                && e.rep == rep
-                && e.controller == ControllerKind::ConcordLogit
-        })
-        .expect("the grid has the cell")
 }
