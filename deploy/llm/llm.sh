@@ -213,6 +213,8 @@ cmd_start() {
         if health "$port" >/dev/null; then
             die "port $port already serves /v1/models but not from $pid_file: another server is running"
         fi
+        model="$("$py" "$here/serve.py" --print-model-path)"
+        [ -f "$model" ] || die "no served model at $model: run '$0 setup' first"
         mkdir -p "$run_dir"
         : >"$log_file"
         local args=(--port "$port") cpus
