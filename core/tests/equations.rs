@@ -7,7 +7,7 @@ use concord_core::choice::{argmax, correct, cosine, idm_accel, ChoiceHistory, Ma
 use concord_core::opm::{delta_ttc, guarded_ttc, MAX_SELECTED};
 use concord_core::params::{AdviceParams, ChoiceParams, OpmParams, Params, TrajectoryParams};
 use concord_core::saliency::{attend, softmax, Saliency, FEATURES};
-use concord_core::scene::{AgentState, Morphology, ProcessState, Turn, Vec2, MAX_AGENTS};
+use concord_core::scene::{AgentState, Morphology, ProcessState, Scene, Turn, Vec2, MAX_AGENTS};
 use concord_core::trajectory::{
     travel, Forecast, FrenetState, Hit, Planner, Quartic, Quintic, Reject, Trajectory,
 };
@@ -992,13 +992,8 @@ fn eq4_an_agent_is_selected_by_its_delta_ttc_or_its_closeness_only() {
     // CAV 50.7 m from the crossing at 10 m/s (TTC 5.1 s); HDV 35 m from it.
     let selected = |hdv_speed: f64, hdv_before: f64| {
         let mut core = paper_core(Params::default());
-        let m = *core.morphology();
-        let (_, s_hdv) = m
-            .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
-            .unwrap();
-        let (hdv, h, _) = m.lane(paper::HDV_STRAIGHT).pose_at(s_hdv - hdv_before, 0);
         let mut scene = paper_scene(0.0, 10.0, 0.0);
-        scene.agents[0] = AgentState::moving(1, hdv, h, hdv_speed);
+        scene.agents[0] = before_the_paper_crossing(1, paper::HDV_STRAIGHT, hdv_before, hdv_speed);
         core.step(&scene, 0.0, None).unwrap();
         core.triplet().n_objects
     };
@@ -1015,19 +1010,16 @@ fn eq4_more_risky_agents_than_slots_keep_the_lowest_delta_ttcs_in_order() {
     // conflict (|ΔTTC| 0.1–3.9 s), three more than the triplet holds. It keeps
     // the eight lowest |ΔTTC|, sorted, whatever their order in the scene.
     let mut core = paper_core(Params::default());
-    let m = *core.morphology();
-    let (s_cav, s_hdv) = m
-        .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
-        .unwrap();
-    let (ego, h, _) = m.lane(paper::CAV_LEFT).pose_at(s_cav - 18.7, 0);
-    let mut scene = paper_scene(0.0, 5.0, 0.0);
-    scene.ego = AgentState::moving(0, ego, h, 5.0);
-    scene.n_agents = 0;
+    let cav = before_the_paper_crossing(0, paper::CAV_LEFT, 18.7, 5.0);
+    let mut scene = Scene::new(0.0, cav, paper::CAV_LEFT);
     for k in 0..11 {
-        let (pos, h, _) = m
-            .lane(paper::HDV_STRAIGHT)
-            .pose_at(s_hdv - 1.0 - 6.0 * k as f64, 0);
-        scene.push(AgentState::moving(1 + k, pos, h, 8.0));
+        let before = 1.0 + 6.0 * k as f64;
+        scene.push(before_the_paper_crossing(
+            1 + k,
+            paper::HDV_STRAIGHT,
+            before,
+            8.0,
+        ));
     }
     core.step(&scene, 0.0, None).unwrap();
     let mut by_risk: Vec<(f64, u32)> = core

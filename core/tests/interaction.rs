@@ -100,14 +100,9 @@ fn arriving_together_with_a_proceeding_car_going_at_speed_is_unsafe_and_the_choi
     // would meet there. The choice either yields or times its turn to pass behind.
     let mut core = paper_core(Params::default());
     let ip = core.params().interaction;
-    let m = *core.morphology();
-    let (s_cav, s_hdv) = m
-        .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
-        .unwrap();
-    let (cav, h_cav, _) = m.lane(paper::CAV_LEFT).pose_at(s_cav - 30.0, 0);
-    let (hdv, h_hdv, _) = m.lane(paper::HDV_STRAIGHT).pose_at(s_hdv - 30.0, 0);
-    let mut scene = Scene::new(0.0, AgentState::moving(0, cav, h_cav, 8.0), paper::CAV_LEFT);
-    scene.push(AgentState::moving(1, hdv, h_hdv, 8.0));
+    let cav = before_the_paper_crossing(0, paper::CAV_LEFT, 30.0, 8.0);
+    let mut scene = Scene::new(0.0, cav, paper::CAV_LEFT);
+    scene.push(before_the_paper_crossing(1, paper::HDV_STRAIGHT, 30.0, 8.0));
     let d = core.step(&scene, 0.0, None).unwrap();
     let c = core.conflicts().pairs()[0];
     let y = core.yields()[0];
@@ -698,12 +693,7 @@ fn a_yielding_car_is_forecast_to_stop_so_the_ego_can_go_first() {
     let (_, scene) = priority_scene(8.0, 25.0, 8.0, 0.0);
     let mut s = scene;
     // Put the cruising car on the major road instead (it then has the right of way).
-    let m = *core.morphology();
-    let (_, s_hdv) = m
-        .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
-        .unwrap();
-    let (hdv, h_hdv, _) = m.lane(paper::HDV_STRAIGHT).pose_at(s_hdv - 25.0, 0);
-    s.agents[0] = AgentState::moving(1, hdv, h_hdv, 8.0);
+    s.agents[0] = before_the_paper_crossing(1, paper::HDV_STRAIGHT, 25.0, 8.0);
     core.step(&s, 0.0, None).unwrap();
     assert!(core.forecasts()[0].stop_in_m.is_infinite());
 }
@@ -1357,28 +1347,28 @@ fn a_car_that_has_left_its_passage_holds_the_margin_behind_it_until_it_has_run_o
     // In the core: the paper's HDV 1 m past its passage at 8 m/s (0.125 s ago) is still a
     // conflict, though no longer a risky one (its TTC is 0, the ego's 2.5 s: ΔTTC is below
     // ΔT_th); 14 m past (1.75 s ago), none.
-    // The conflict with the paper's HDV at `s_hdv` m along its lane, 8 m/s, the CAV 20 m
-    // before the crossing at 8 m/s, and the HDV's conflict point along its lane.
-    let conflict_at = |s_hdv: Option<f64>| {
+    // The conflict with the paper's HDV `before` m before the crossing at 8 m/s, the CAV 20 m
+    // before it at 8 m/s.
+    let conflict_at = |before: f64| {
         let mut core = paper_core(Params::default());
-        let m = *core.morphology();
-        let (s_cav, s_point) = m
-            .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
-            .unwrap();
-        let (cav, h_cav, _) = m.lane(paper::CAV_LEFT).pose_at(s_cav - 20.0, 0);
-        let s_hdv = s_hdv.unwrap_or(s_point - 20.0);
-        let (hdv, h_hdv, _) = m.lane(paper::HDV_STRAIGHT).pose_at(s_hdv, 0);
-        let mut scene = Scene::new(0.0, AgentState::moving(0, cav, h_cav, 8.0), paper::CAV_LEFT);
-        scene.push(AgentState::moving(1, hdv, h_hdv, 8.0));
+        let cav = before_the_paper_crossing(0, paper::CAV_LEFT, 20.0, 8.0);
+        let mut scene = Scene::new(0.0, cav, paper::CAV_LEFT);
+        scene.push(before_the_paper_crossing(
+            1,
+            paper::HDV_STRAIGHT,
+            before,
+            8.0,
+        ));
         core.step(&scene, 0.0, None).unwrap();
-        (core.conflicts().pairs().first().copied(), s_hdv)
+        core.conflicts().pairs().first().copied()
     };
-    // Where the HDV leaves its passage, from 20 m before the crossing.
-    let pass_exit = match conflict_at(None) {
-        (Some(c), s) => s + c.agent_pass_m[1],
-        (None, _) => panic!("a conflict before the crossing"),
-    };
-    let past = |beyond: f64| conflict_at(Some(pass_exit + beyond)).0;
+    // Where the HDV leaves its passage, as a distance before the crossing, seen from 20 m
+    // before it.
+    let pass_exit = 20.0
+        - conflict_at(20.0)
+            .expect("a conflict before the crossing")
+            .agent_pass_m[1];
+    let past = |beyond: f64| conflict_at(pass_exit - beyond);
     let just_left = past(1.0).expect("still in conflict 0.125 s after it left");
     assert!((just_left.agent_pass_m[1] + 1.0).abs() < 1e-6);
     assert!(!just_left.is_risky(&OpmParams::default()));

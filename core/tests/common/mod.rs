@@ -18,6 +18,23 @@ pub fn paper_scene(t: f64, cav_speed: f64, hdv_speed: f64) -> Scene {
     scene
 }
 
+/// A road user `id` moving at `speed` m/s on the paper's `lane` (`paper::CAV_LEFT` or
+/// `paper::HDV_STRAIGHT`), `before` m along it before the point where the two cross (negative:
+/// past it).
+pub fn before_the_paper_crossing(id: u32, lane: u8, before: f64, speed: f64) -> AgentState {
+    let m = BuiltIn::PaperIntersection.morphology();
+    let (s_cav, s_hdv) = m
+        .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
+        .expect("the paper's routes cross");
+    let s = match lane {
+        paper::CAV_LEFT => s_cav,
+        paper::HDV_STRAIGHT => s_hdv,
+        _ => panic!("lane {lane} is not one of the paper's crossing routes"),
+    };
+    let (pos, heading, _) = m.lane(lane).pose_at(s - before, 0);
+    AgentState::moving(id, pos, heading, speed)
+}
+
 /// A core on the paper's junction, boxed as a deployment holds it (it is a few hundred KB).
 pub fn paper_core(params: Params) -> Box<DecisionCore> {
     Box::new(
