@@ -50,7 +50,7 @@ pub use trajectory::{Trajectory, TrajectoryPoint};
 
 use advice::RequestLog;
 use choice::{ChoiceHistory, ChoiceOutcome, EgoContext, Profile};
-use negotiation::{Negotiation, Phase};
+use negotiation::{EhmiDisplay, Negotiation, Phase};
 use opm::{ConflictPair, ConflictSet, OpmTriplet};
 use saliency::Saliency;
 use scene::{
@@ -130,7 +130,8 @@ pub struct Decision {
     /// What the eHMI announces: going first while a deadlock negotiation has announced it, or
     /// when the executed trajectory enters a conflicting road user's passage before that road
     /// user has left it; giving way when it passes behind every one or stays out; without a
-    /// conflict ahead, giving way when the executed maneuver gives way, else going first.
+    /// conflict ahead, giving way when the executed maneuver gives way, else going first. A
+    /// change other than the negotiation's shows once it has held `announce_settle_s`.
     pub announce: Announcement,
     /// Phase of the deadlock negotiation.
     pub negotiation: Phase,
@@ -164,6 +165,8 @@ pub struct DecisionCore {
     last: Decision,
     ego_lane: u8,
     negotiation: Negotiation,
+    /// What the eHMI shows.
+    display: EhmiDisplay,
     /// Probability that the other of each conflict pair lets the ego go first.
     yields: [f64; MAX_AGENTS],
     forecasts: [Forecast; MAX_AGENTS],
@@ -197,6 +200,7 @@ impl DecisionCore {
             last: Decision::default(),
             ego_lane: 0,
             negotiation: Negotiation::default(),
+            display: EhmiDisplay::default(),
             yields: [0.0; MAX_AGENTS],
             forecasts: [Forecast::default(); MAX_AGENTS],
             last_advice_id: 0,
@@ -272,6 +276,7 @@ impl DecisionCore {
             self.history = History::default();
             self.choices = ChoiceHistory::default();
             self.negotiation = Negotiation::default();
+            self.display = EhmiDisplay::default();
         }
         self.last_scene_time_s = scene.time_s;
         self.cycle += 1;
@@ -481,7 +486,8 @@ impl DecisionCore {
                 self.minimum_risk(stop, &lane, &mut decision)
             }
         }
-        decision.announce = if self.negotiation.announces() {
+        let negotiated = self.negotiation.announces();
+        let meant = if negotiated {
             Announcement::GoingFirst
         } else {
             self.order(&decision.trajectory)
@@ -491,6 +497,9 @@ impl DecisionCore {
                     Announcement::GoingFirst
                 })
         };
+        decision.announce =
+            self.display
+                .show(meant, scene.time_s, negotiated, &self.params.interaction);
         self.choices
             .record(scene.time_s, self.choice.state, decision.maneuver);
         self.last = decision;
@@ -500,12 +509,16 @@ impl DecisionCore {
     /// What `trajectory` means for the road users in conflict with the ego: it goes first when
     /// it enters some one's passage of the conflict zone before that road user, proceeding, has
     /// left it (at its latest, [`choice::proceeding_interval`]); it gives way when it passes
-    /// behind every one of them or stays out of their passages within the horizon. `None`
+    /// behind every one of them or stays out of their passages within the horizon. The eHMI
+    /// speaks to everyone: while the plan passes behind a road user that could stop only
+    /// braking harder than `request_decel_mps2` ([`negotiation::asked_hard`]), "going first"
+    /// meant for another would ask that one to brake hard, so the plan gives way. `None`
     /// without a conflict still ahead of both.
     fn order(&self, trajectory: &trajectory::Trajectory) -> Option<Announcement> {
         let points = trajectory.points();
         let s0 = points.first()?.s;
-        let mut ahead = false;
+        let ip = &self.params.interaction;
+        let (mut ahead, mut first, mut misread) = (false, false, false);
         for c in self.conflicts.pairs() {
             if c.ego_pass_m[1] <= 0.0 || c.agent_pass_m[1] <= 0.0 {
                 continue;
@@ -515,12 +528,18 @@ impl DecisionCore {
                 .iter()
                 .find(|q| q.s - s0 >= c.ego_pass_m[0])
                 .map(|q| q.t);
-            let (_, other_leaves) = choice::proceeding_interval(c, &self.params.interaction);
+            let (_, other_leaves) = choice::proceeding_interval(c, ip);
             if enters.is_some_and(|t| t < other_leaves) {
-                return Some(Announcement::GoingFirst);
+                first = true;
+            } else {
+                misread |= negotiation::asked_hard(c, ip);
             }
         }
-        ahead.then_some(Announcement::GivingWay)
+        if first && !misread {
+            Some(Announcement::GoingFirst)
+        } else {
+            ahead.then_some(Announcement::GivingWay)
+        }
     }
 
     /// Distance, m, within which the ego must stop behind its car-following leader should the

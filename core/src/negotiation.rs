@@ -17,7 +17,8 @@
 //! `watch_s` (a reaction time), one that gives way (standing or creeping, or braking as one
 //! that yields: its implicit intent at least `trust_yield`) → `Going`: it counts as yielding,
 //! and the plan may go first. One that speeds up or passes its point of no return, or that
-//! after `watch_s` still comes on too fast to stop gently, has refused: → `Idle`, the ego gives
+//! after `watch_s` still comes on too fast to stop gently without having slowed by
+//! [`COMPLYING_MPS2`] on average since the announcement, has refused: → `Idle`, the ego gives
 //! way again and does not ask it again ([`REFUSALS`] remembered). `Going` → `Idle` once the
 //! ego has left that conflict zone; the other speeding up by [`SPEEDING_UP_MPS`] or passing its
 //! point of no return while the ego has not entered its zone, or the ego still standing
@@ -26,6 +27,7 @@
 use crate::choice::proceeding_interval;
 use crate::opm::ConflictPair;
 use crate::params::InteractionParams;
+use crate::Announcement;
 use libm::sqrt;
 
 /// Both parties count as waiting for each other only this close to their zones, m.
@@ -34,6 +36,8 @@ pub const NEAR_ZONE_M: f64 = 25.0;
 const MOVING_OFF_MPS2: f64 = 0.5;
 /// Speed gain since the ego announced from which the other is taking the way, m/s.
 const SPEEDING_UP_MPS: f64 = 0.5;
+/// Mean deceleration since the ego announced from which the other complies, m/s².
+const COMPLYING_MPS2: f64 = 0.3;
 /// How many refusals the negotiation remembers.
 pub const REFUSALS: usize = 4;
 
@@ -65,6 +69,8 @@ pub struct Negotiation {
     refused: [Option<u32>; REFUSALS],
     /// The other's lowest speed since the ego announced, m/s.
     lowest_mps: f64,
+    /// The other's speed when the ego announced, m/s.
+    announced_mps: f64,
 }
 
 fn moving_off(c: &ConflictPair, ip: &InteractionParams) -> bool {
@@ -95,6 +101,13 @@ fn stop_decel(c: &ConflictPair, ip: &InteractionParams) -> f64 {
     } else {
         f64::INFINITY
     }
+}
+
+/// True when road user `c` approaches its zone and could still stop before it, but only
+/// braking harder than `request_decel_mps2`: a message asking it to wait would ask it to brake
+/// hard.
+pub fn asked_hard(c: &ConflictPair, ip: &InteractionParams) -> bool {
+    approaches(c, ip) && stop_decel(c, ip) > ip.request_decel_mps2
 }
 
 /// True when road user `c` gives way to the ego: standing or creeping, or braking as one that
@@ -164,12 +177,16 @@ impl Negotiation {
                     Some((Phase::Going, self.agent_id))
                 }
                 // One speeding up or past its point of no return has answered; so has one
-                // that, watched, kept coming until it could no longer stop gently.
+                // that, watched, kept coming until it could no longer stop gently. One that has
+                // slowed since the announcement by [`COMPLYING_MPS2`] on average complies, if
+                // later or more gently than asked (a driver's IDM brakes harder near its line).
                 Some(c)
                     if c.ego_zone_m[0] > 0.0
                         && (takes_way(c, self.lowest_mps)
                             || (elapsed >= ip.watch_s
-                                && stop_decel(c, ip) > ip.request_decel_mps2)) =>
+                                && stop_decel(c, ip) > ip.request_decel_mps2
+                                && self.announced_mps - c.agent_speed_mps
+                                    < COMPLYING_MPS2 * elapsed)) =>
                 {
                     self.refuse();
                     None
@@ -198,6 +215,7 @@ impl Negotiation {
                         .iter()
                         .find(|c| id_of(c.agent) == id)
                         .map_or(0.0, |c| c.agent_speed_mps);
+                    self.announced_mps = self.lowest_mps;
                 }
                 self.phase = phase;
                 self.agent_id = id;
@@ -230,7 +248,7 @@ impl Negotiation {
         let gentle = |c: &ConflictPair| stop_decel(c, ip) <= ip.request_decel_mps2;
         if conflicts
             .iter()
-            .any(|c| c.ego_zone_m[0] > 0.0 && approaches(c, ip) && !gentle(c))
+            .any(|c| c.ego_zone_m[0] > 0.0 && asked_hard(c, ip))
         {
             return None;
         }
@@ -259,5 +277,43 @@ impl Negotiation {
     /// True when road user `id` has let the ego go first after its announcement.
     pub fn yielded(&self, id: u32) -> bool {
         self.phase == Phase::Going && self.agent_id == id
+    }
+}
+
+/// What the eHMI shows ([`crate::Decision::announce`]). A change in what the executed plan
+/// means is shown once it has held for `announce_settle_s`; the negotiation's own
+/// announcement, a deliberate request, is shown at once. The plan is sampled anew every
+/// cycle, and where its best sample passes just before or just behind a road user, what it
+/// means can change from one cycle to the next: a display that followed it would flash
+/// "going first" for 50 ms, and a driver who complied would brake for nothing.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EhmiDisplay {
+    shown: Option<Announcement>,
+    meant: Announcement,
+    /// When the plan began to mean `meant`, s.
+    meant_since_s: f64,
+}
+
+impl EhmiDisplay {
+    /// The announcement to show at `now`, s, when the plan means `meant` (`at_once` for the
+    /// negotiation's announcement); the first one is shown at once.
+    pub fn show(
+        &mut self,
+        meant: Announcement,
+        now: f64,
+        at_once: bool,
+        ip: &InteractionParams,
+    ) -> Announcement {
+        if meant != self.meant {
+            self.meant = meant;
+            self.meant_since_s = now;
+        }
+        let settled = now - self.meant_since_s >= ip.announce_settle_s;
+        let shown = match self.shown {
+            Some(shown) if shown != meant && !at_once && !settled => shown,
+            _ => meant,
+        };
+        self.shown = Some(shown);
+        shown
     }
 }

@@ -217,6 +217,11 @@ pub struct InteractionParams {
     /// harder, m/s². Well below `max_imposed_decel_mps2`, since drivers brake earlier and
     /// harder than the kinematic minimum. 0 never asks (traffic that does not read the eHMI).
     pub request_decel_mps2: f64,
+    /// A change in what the plan means for the others ("going first", "please go ahead") is
+    /// shown on the eHMI once it has held this long, s; the negotiation's announcement is
+    /// shown at once ([`crate::negotiation::EhmiDisplay`]). About a glance: long enough that one
+    /// cycle's sample does not flash a message, short against a driver's reaction time.
+    pub announce_settle_s: f64,
     /// Utility penalty of a maneuver rejected for courtesy (kept finite so the logit stays
     /// defined; large enough that it is never chosen over one that is not rejected).
     pub courtesy_penalty: f64,
@@ -273,6 +278,7 @@ impl Default for InteractionParams {
             deadlock_after_s: 0.5,
             watch_s: 1.0,
             request_decel_mps2: 1.5,
+            announce_settle_s: 0.3,
             courtesy_penalty: 10.0,
             follower: Follower::Kinematic,
             // Treiber & Kesting's IDM calibrations, as the simulator's balanced driver.
@@ -670,6 +676,12 @@ impl Params {
                 i.request_decel_mps2,
                 0.0,
                 20.0,
+            ),
+            (
+                "interaction.announce_settle_s",
+                i.announce_settle_s,
+                0.0,
+                10.0,
             ),
             (
                 "interaction.courtesy_penalty",

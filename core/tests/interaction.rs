@@ -9,7 +9,7 @@ use concord_core::choice::{
     EgoContext, Maneuver, Profile,
 };
 use concord_core::intent::{infer, Motion, Stated};
-use concord_core::negotiation::{EgoState, Negotiation, Phase};
+use concord_core::negotiation::{EgoState, EhmiDisplay, Negotiation, Phase};
 use concord_core::opm::{ConflictPair, ConflictSet, OpmTriplet};
 use concord_core::params::{ChoiceParams, Follower, InteractionParams, OpmParams, Params};
 use concord_core::scene::{
@@ -810,6 +810,85 @@ fn a_car_that_keeps_coming_after_the_request_is_let_through_and_not_asked_again(
     assert!(!n.announces());
     n.update(&[approaching(40.0, 8.0, 0.0)], id, &ego(0.0), 2.1, &ip);
     assert_eq!(n.phase, Phase::Idle);
+}
+
+#[test]
+fn a_car_that_slows_after_the_request_complies_even_if_it_brakes_later_than_asked() {
+    let ip = InteractionParams::default();
+    let id = |_| 7;
+    let mut n = Negotiation::default();
+    n.update(&[approaching(40.0, 8.0, 0.0)], id, &ego(0.0), 0.0, &ip);
+    assert_eq!(n.phase, Phase::Announced);
+    // 2 s later, 14 m out at 6.5 m/s: it needs 1.96 m/s² after its reaction, but it has slowed
+    // by 0.75 m/s² on average since the request (a driver's IDM brakes harder near its line).
+    n.update(&[approaching(14.0, 6.5, 0.0)], id, &ego(0.0), 2.0, &ip);
+    assert_eq!(n.phase, Phase::Announced);
+    // Slowed by less than 0.3 m/s² on average: it keeps coming.
+    let mut n = Negotiation::default();
+    n.update(&[approaching(40.0, 8.0, 0.0)], id, &ego(0.0), 0.0, &ip);
+    n.update(&[approaching(14.0, 7.5, 0.0)], id, &ego(0.0), 2.0, &ip);
+    assert_eq!(n.phase, Phase::Idle);
+}
+
+#[test]
+fn the_ehmi_shows_a_change_once_it_has_held_and_the_negotiations_at_once() {
+    use concord_core::Announcement::{GivingWay, GoingFirst};
+    let ip = InteractionParams::default();
+    assert_eq!(ip.announce_settle_s, 0.3);
+    let mut shown = EhmiDisplay::default();
+    let mut show = |meant, t, negotiated| shown.show(meant, t, negotiated, &ip);
+    // The first is shown at once.
+    assert_eq!(show(GivingWay, 0.0, false), GivingWay);
+    // One cycle's "going first" between two "please go ahead" is not shown.
+    assert_eq!(show(GoingFirst, 0.05, false), GivingWay);
+    assert_eq!(show(GivingWay, 0.1, false), GivingWay);
+    // Held from 0.2 s: shown from 0.5 s on.
+    assert_eq!(show(GoingFirst, 0.2, false), GivingWay);
+    assert_eq!(show(GoingFirst, 0.45, false), GivingWay);
+    assert_eq!(show(GoingFirst, 0.5, false), GoingFirst);
+    assert_eq!(show(GivingWay, 0.55, false), GoingFirst);
+    // The negotiation's announcement is a request: shown at once.
+    assert_eq!(show(GivingWay, 1.0, false), GivingWay);
+    assert_eq!(show(GoingFirst, 1.05, true), GoingFirst);
+    // With no settling time the display follows the plan.
+    let instant = InteractionParams {
+        announce_settle_s: 0.0,
+        ..ip
+    };
+    let mut shown = EhmiDisplay::default();
+    assert_eq!(shown.show(GivingWay, 0.0, false, &instant), GivingWay);
+    assert_eq!(shown.show(GoingFirst, 0.05, false, &instant), GoingFirst);
+}
+
+#[test]
+fn going_first_is_not_shown_while_passing_behind_one_it_would_ask_to_brake_hard() {
+    use concord_core::Announcement::{GivingWay, GoingFirst};
+    // The CAV 20 m before its crossing at 6 m/s; on the priority road, car 1 15 m before the
+    // crossing at 7 m/s (9.75 m before its zone: it could stop, but at 3.9 m/s² after its
+    // reaction) and car 2 55 m back.
+    let announce = |cars: &[(u32, f64)]| {
+        let cav = before_the_paper_crossing(0, paper::CAV_LEFT, 20.0, 6.0);
+        let mut scene = Scene::new(0.0, cav, paper::CAV_LEFT);
+        for &(id, before) in cars {
+            scene.push(before_the_paper_crossing(
+                id,
+                paper::HDV_STRAIGHT,
+                before,
+                7.0,
+            ));
+        }
+        let d = paper_core(Params::default())
+            .step(&scene, 0.0, None)
+            .unwrap();
+        (d.announce, d.maneuver)
+    };
+    // Car 2 alone: the plan goes before it, and the eHMI says so.
+    assert_eq!(announce(&[(2, 55.0)]).0, GoingFirst);
+    // Behind car 1 and before car 2, "going first" would ask car 1 to brake hard: the eHMI
+    // tells everyone to go ahead, and the plan, which keeps its margins against car 2
+    // proceeding, does not change.
+    let (shown, maneuver) = announce(&[(1, 15.0), (2, 55.0)]);
+    assert_eq!(shown, GivingWay, "{maneuver:?}");
 }
 
 #[test]

@@ -178,6 +178,7 @@ pub fn run_episode_with(
             ego_pos: pos,
             ego_heading: heading,
             collided,
+            ehmi: None,
             hdvs: (0..w.hdvs.len())
                 .map(|i| {
                     let (ego_d, d) = w.to_conflict(i);
@@ -205,6 +206,7 @@ pub fn run_episode_with(
             },
         };
         let cmd = controller.act(&w, &drivers);
+        sample.ehmi = cmd.ehmi;
         for (i, d) in drivers.iter_mut().enumerate() {
             let r = d.act(&w, i, cmd.ehmi);
             accels[i] = r.accel;
@@ -443,7 +445,7 @@ fn t975(df: usize) -> f64 {
 }
 
 /// Metric columns: name and value (booleans as 0 or 1).
-pub fn columns(m: &Metrics) -> [(&'static str, f64); 13] {
+pub fn columns(m: &Metrics) -> [(&'static str, f64); 15] {
     [
         ("avg_speed_mps", m.avg_speed_mps),
         ("avg_abs_jerk_mps3", m.avg_abs_jerk_mps3),
@@ -461,6 +463,8 @@ pub fn columns(m: &Metrics) -> [(&'static str, f64); 13] {
             "wait_while_other_stands_total_s",
             m.wait_while_other_stands_total_s,
         ),
+        ("ehmi_changes", f64::from(m.ehmi_changes)),
+        ("imposed_at_start_mps2", m.imposed_at_start_mps2),
     ]
 }
 
@@ -718,14 +722,14 @@ pub fn paper_table(rows: &[SummaryRow]) -> String {
 /// The interaction experiment's summary table (Markdown): means ± 95 % CI, and the smallest
 /// PET, the largest imposed deceleration, the median and largest deadlock over the episodes.
 pub fn interaction_table(rows: &[SummaryRow]) -> String {
-    let mut out = String::from("| scenario | controller | speed | n | collisions | success | avg speed m/s | avg \\|jerk\\| m/s³ | conflict duration s | PET min s | PET mean s | imposed decel max m/s² | imposed decel mean m/s² | standing s | stood in crossing | wait while other stands median s | wait max s | time to clear s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    let mut out = String::from("| scenario | controller | speed | n | collisions | success | avg speed m/s | avg \\|jerk\\| m/s³ | conflict duration s | PET min s | PET mean s | imposed decel max m/s² | imposed decel mean m/s² | standing s | stood in crossing | wait while other stands median s | wait max s | time to clear s | eHMI changes |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     let stat = |r: &SummaryRow, metric: &str, f: fn(&Stat) -> f64| {
         value_cell(r.stat(metric).map_or(f64::NAN, f))
     };
     for r in rows {
         let _ = writeln!(
             out,
-            "| {} | {} | {:.0} | {} | {} | {:.0} % | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {:.0} | {} | {} | {:.0} % | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.scenario.name(),
             r.controller.name(),
             r.speed,
@@ -744,6 +748,7 @@ pub fn interaction_table(rows: &[SummaryRow]) -> String {
             stat(r, "wait_while_other_stands_s", |s| s.median),
             stat(r, "wait_while_other_stands_s", |s| s.max),
             mean_cell(r.get("time_to_clear_s")),
+            mean_cell(r.get("ehmi_changes")),
         );
     }
     out

@@ -22,7 +22,9 @@
 //!   conflict zone; the stream's measure of delay), s.
 //! * **Imposed deceleration**, m/s²: the largest braking the CAV imposed on any HDV (its
 //!   driver's acceleration with the CAV's constraint when that is negative and below the one
-//!   without, noise left out; see `driver`).
+//!   without, noise left out; see `driver`), and the part of it at the first step
+//!   (**imposed at the start**: the scene as drawn, before any decision of the CAV has moved
+//!   it, which every controller imposes alike).
 //! * **Standing**, s: the time the CAV stood (speed < [`STOOD_MPS`]) before it cleared the
 //!   conflict zone.
 //! * **Stood in a crossing**: whether the CAV ever stood (speed < [`STOOD_MPS`]) with a corner
@@ -33,10 +35,14 @@
 //!   among those not yet in or past their zone) while that HDV also stood before it, both
 //!   below [`WAIT_STAND_MPS`], with no HDV inside a zone: the deadlock time.
 //!
+//! * **eHMI changes**: how often the CAV's eHMI message changed before it cleared the conflict
+//!   zone (a message that flickers makes a driver who complies brake for nothing).
+//!
 //! Durations sum the sample intervals that start at a step with the property.
 
 use concord_core::scene::{Lane, Vec2};
 
+use crate::driver::Signal;
 use crate::world::footprint;
 
 /// Below this speed the CAV stands, for standing time and standing in a crossing, m/s.
@@ -66,6 +72,8 @@ pub struct Sample {
     pub ego_pos: Vec2,
     pub ego_heading: f64,
     pub collided: bool,
+    /// The CAV's eHMI message this step (`None`: none shown).
+    pub ehmi: Option<Signal>,
     /// Every HDV, in the world's order.
     pub hdvs: Vec<HdvSample>,
 }
@@ -99,11 +107,13 @@ pub struct Metrics {
     pub success: bool,
     pub time_to_clear_s: f64,
     pub imposed_decel_mps2: f64,
+    pub imposed_at_start_mps2: f64,
     pub standing_s: f64,
     pub stood_in_crossing: bool,
     /// The longest and the total deadlock time, s.
     pub wait_while_other_stands_s: f64,
     pub wait_while_other_stands_total_s: f64,
+    pub ehmi_changes: u32,
 }
 
 /// Guarded time to cover `d` m at `v` m/s.
@@ -261,6 +271,11 @@ pub fn compute(samples: &[Sample], layout: &Layout) -> Metrics {
             run = 0.0;
         }
     }
+    let shown: Vec<Signal> = samples[..clear_at.unwrap_or(samples.len())]
+        .iter()
+        .filter_map(|s| s.ehmi)
+        .collect();
+    let ehmi_changes = shown.windows(2).filter(|w| w[0] != w[1]).count() as u32;
     Metrics {
         avg_speed_mps: avg_speed,
         avg_abs_jerk_mps3: avg_jerk,
@@ -271,10 +286,14 @@ pub fn compute(samples: &[Sample], layout: &Layout) -> Metrics {
         success: on && !collision,
         time_to_clear_s: clear_at.map_or(f64::INFINITY, |c| samples[c].t),
         imposed_decel_mps2: imposed,
+        imposed_at_start_mps2: samples.first().map_or(0.0, |s| {
+            s.hdvs.iter().map(|h| h.imposed_mps2).fold(0.0, f64::max)
+        }),
         standing_s: standing,
         stood_in_crossing,
         wait_while_other_stands_s: longest,
         wait_while_other_stands_total_s: total,
+        ehmi_changes,
     }
 }
 
@@ -308,6 +327,7 @@ mod tests {
                     ego_pos: Vec2::new(100.0, 100.0),
                     ego_heading: 0.0,
                     collided: false,
+                    ehmi: None,
                     hdvs: hdvs
                         .iter()
                         .map(|h| HdvSample {
@@ -414,12 +434,35 @@ mod tests {
     }
 
     #[test]
+    fn ehmi_changes_count_each_new_message_until_the_cav_has_cleared() {
+        // The CAV clears its zone (5 m past the point) at 2.0 s, from 15 m at 10 m/s.
+        let mut s = straight((15.0, 10.0), &[(40.0, 5.0)], 3.0);
+        let shows = |s: &mut [Sample], from: usize, to: usize, signal| {
+            s[from..to].iter_mut().for_each(|x| x.ehmi = Some(signal));
+        };
+        shows(&mut s, 0, 5, Signal::Yield);
+        shows(&mut s, 5, 6, Signal::Proceed);
+        shows(&mut s, 6, 10, Signal::Yield);
+        // Steps without a message do not split one; after clearing, changes do not count.
+        s[7].ehmi = None;
+        shows(&mut s, 25, 31, Signal::Proceed);
+        assert_eq!(compute(&s, &zones(1)).ehmi_changes, 2);
+        shows(&mut s, 12, 14, Signal::Proceed);
+        assert_eq!(compute(&s, &zones(1)).ehmi_changes, 3);
+    }
+
+    #[test]
     fn imposed_deceleration_is_the_largest_over_hdvs_and_steps() {
         let mut s = straight((30.0, 10.0), &[(60.0, 10.0), (90.0, 10.0)], 5.0);
         s[3].hdvs[0].imposed_mps2 = 1.5;
         s[7].hdvs[1].imposed_mps2 = 2.5;
         s[8].hdvs[0].imposed_mps2 = 0.5;
         assert_eq!(compute(&s, &zones(2)).imposed_decel_mps2, 2.5);
+        assert_eq!(compute(&s, &zones(2)).imposed_at_start_mps2, 0.0);
+        s[0].hdvs[1].imposed_mps2 = 3.5;
+        s[0].hdvs[0].imposed_mps2 = 1.0;
+        let m = compute(&s, &zones(2));
+        assert_eq!((m.imposed_decel_mps2, m.imposed_at_start_mps2), (3.5, 3.5));
     }
 
     /// The CAV drives 10 m/s for 2 s, stands 3 s 10 m before the zone, and drives on at 10
@@ -450,6 +493,7 @@ mod tests {
                     ego_pos: Vec2::new(100.0, 100.0),
                     ego_heading: 0.0,
                     collided: false,
+                    ehmi: None,
                     hdvs: vec![HdvSample {
                         ego_d,
                         d,
