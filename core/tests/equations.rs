@@ -169,7 +169,8 @@ fn eq13_history_consistency_is_the_max_cosine_over_matching_records() {
     h.record(0.0, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0], Maneuver::Accelerate);
     h.record(0.1, [0.0, 1.0, 0.0, 0.0, 0.0, 0.0], Maneuver::Accelerate);
     h.record(0.2, [0.0, 0.0, 1.0, 0.0, 0.0, 0.0], Maneuver::Decelerate);
-    h.record(0.25, [0.0, 0.0, 0.0, 1.0, 0.0, 0.0], Maneuver::TurnLeft); // < 0.1 s later: not stored
+    // < 0.1 s later: not stored (its state is not orthogonal to the query, so it would show).
+    h.record(0.25, [1.0, 0.0, 0.0, 1.0, 0.0, 0.0], Maneuver::TurnLeft);
     let d = h.d_prev(&[3.0, 1.0, 0.0, 0.0, 0.0, 0.0]);
     assert!((d[0] - 3.0 / 10f64.sqrt()).abs() < EPS);
     assert_eq!(d[1], 0.0);
@@ -927,6 +928,23 @@ fn table2_the_lateral_jerk_limit_holds_between_the_ends() {
         }
     }
     assert!(interior > 0, "no candidate whose jerk peaks only inside");
+    // One whose jerk exceeds the limit only near its vertex, t = −24·c₄/(120·c₅) = 0.3 s
+    // (12 m/s³ there, 6 at the ends): the vertex must be where the check looks.
+    let q = Quintic::fit(0.5, -3.0, 6.0, -0.3, 0.0, 0.0, 1.0);
+    let vertex = -24.0 * q.c[4] / (120.0 * q.c[5]);
+    assert!(
+        (q.jerk(vertex).abs() - 12.0).abs() < 1e-6,
+        "{}",
+        q.jerk(vertex)
+    );
+    let mut planner = lone;
+    planner.start.dl = -3.0;
+    planner.start.ddl = 6.0;
+    assert!(planner.evaluate(1.0, 10.0, -0.3, &lifted).is_ok());
+    assert_eq!(
+        planner.evaluate(1.0, 10.0, -0.3, &p),
+        Err(concord_core::trajectory::Reject::Limits)
+    );
 }
 
 #[test]
@@ -1881,4 +1899,89 @@ fn eq2_a_lane_branching_off_another_is_no_conflict_one_starting_across_it_is() {
         .expect("a lane starting across the main lane conflicts");
     assert_eq!(c.kind, ConflictKind::Crossing);
     assert!((c.s_a - 50.0).abs() < 1e-6, "{}", c.s_a);
+}
+
+#[test]
+fn toward_a_target_accelerates_or_brakes_at_the_nominal_rates_and_holds_at_it() {
+    use concord_core::choice::{toward, EgoContext};
+    let p = ChoiceParams::default();
+    let ctx = EgoContext {
+        speed: 8.0,
+        speed_cap: 13.9,
+        min_duration: 1.0,
+        max_duration: 6.0,
+        ..Default::default()
+    };
+    let down = toward(5.0, &ctx, &p);
+    assert_eq!((down.accel, down.target_speed), (-p.decelerate_mps2, 5.0));
+    let up = toward(10.0, &ctx, &p);
+    assert_eq!((up.accel, up.target_speed), (p.accelerate_mps2, 10.0));
+    let hold = toward(8.0, &ctx, &p);
+    assert_eq!((hold.accel, hold.target_speed), (0.0, 8.0));
+    // Above the speed cap, the target is the cap.
+    assert_eq!(toward(20.0, &ctx, &p).target_speed, 13.9);
+}
+
+#[test]
+fn a_road_user_stating_an_emergency_adds_its_task_gain_to_the_safety_preference() {
+    use concord_core::scene::{Rated, Task};
+    let mut core = paper_core(Params::default());
+    core.step(&paper_scene(0.0, 8.0, 8.0), 0.0, None).unwrap();
+    let plain = core.choice().safety_preference;
+    let mut core = paper_core(Params::default());
+    let mut scene = paper_scene(0.0, 8.0, 8.0);
+    scene.agents[0].intent.task = Some(Rated {
+        value: Task::Emergency,
+        confidence: 0.9,
+    });
+    core.step(&scene, 0.0, None).unwrap();
+    let gain = ChoiceParams::default().other_task_safety[Task::Emergency as usize];
+    assert!(gain > 0.0);
+    assert!(
+        (core.choice().safety_preference - (plain + gain)).abs() < EPS,
+        "{plain} + {gain} != {}",
+        core.choice().safety_preference
+    );
+}
+
+#[test]
+fn a_trajectory_sample_interpolates_between_its_points_heading_included() {
+    use concord_core::TrajectoryPoint;
+    let mut tr = Trajectory::default();
+    tr.points[0] = TrajectoryPoint {
+        t: 0.0,
+        s: 0.0,
+        speed: 4.0,
+        heading: 3.1,
+        ..Default::default()
+    };
+    tr.points[1] = TrajectoryPoint {
+        t: 1.0,
+        s: 5.0,
+        speed: 6.0,
+        // Across ±π: the turn is the short way, 0.2 rad.
+        heading: 3.3 - std::f64::consts::TAU,
+        ..Default::default()
+    };
+    tr.n = 2;
+    let q = tr.sample(0.25).unwrap();
+    assert!(
+        (q.s - 1.25).abs() < EPS && (q.speed - 4.5).abs() < EPS,
+        "{q:?}"
+    );
+    assert!((q.heading - 3.15).abs() < 1e-9, "{q:?}");
+    assert_eq!(
+        tr.sample(2.0).unwrap().s,
+        5.0,
+        "past the end: the last point"
+    );
+}
+
+#[test]
+fn the_rendered_trajectory_covers_the_whole_horizon() {
+    let p = Params::default().trajectory;
+    let core = lone_ego(10.0);
+    let points = core.last_decision().trajectory.points();
+    assert_eq!(points.len(), (p.horizon_s / p.dt_s).round() as usize + 1);
+    assert!((points.last().unwrap().t - p.horizon_s).abs() < 1e-9);
 }
