@@ -1244,24 +1244,30 @@ fn each_risky_conflict_adds_the_intensity_gain_to_the_safety_preference() {
     );
 }
 
+/// The safety preference at the paper's start at 8 m/s, with the HDV's explicit intent as
+/// `state` sets it.
+fn safety_preference_with(state: impl FnOnce(&mut concord_core::scene::ExplicitIntent)) -> f64 {
+    let mut core = paper_core(Params::default());
+    let mut scene = paper_scene(0.0, 8.0, 8.0);
+    state(&mut scene.agents[0].intent);
+    core.step(&scene, 0.0, None).unwrap();
+    core.choice().safety_preference
+}
+
 #[test]
 fn a_road_user_stating_it_proceeds_adds_its_gain_to_the_safety_preference() {
     use concord_core::scene::{IntentAction, Rated};
-    let mut core = paper_core(Params::default());
-    core.step(&paper_scene(0.0, 8.0, 8.0), 0.0, None).unwrap();
-    let plain = core.choice().safety_preference;
-    let mut core = paper_core(Params::default());
-    let mut scene = paper_scene(0.0, 8.0, 8.0);
-    scene.agents[0].intent.action = Some(Rated {
-        value: IntentAction::Proceed,
-        confidence: 0.9,
+    let plain = safety_preference_with(|_| {});
+    let stated = safety_preference_with(|i| {
+        i.action = Some(Rated {
+            value: IntentAction::Proceed,
+            confidence: 0.9,
+        })
     });
-    core.step(&scene, 0.0, None).unwrap();
     let gain = ChoiceParams::default().other_proceeds_safety;
     assert!(
-        (core.choice().safety_preference - (plain + gain)).abs() < EPS,
-        "{plain} + {gain} != {}",
-        core.choice().safety_preference
+        (stated - (plain + gain)).abs() < EPS,
+        "{plain} + {gain} != {stated}"
     );
 }
 
@@ -1925,22 +1931,18 @@ fn toward_a_target_accelerates_or_brakes_at_the_nominal_rates_and_holds_at_it() 
 #[test]
 fn a_road_user_stating_an_emergency_adds_its_task_gain_to_the_safety_preference() {
     use concord_core::scene::{Rated, Task};
-    let mut core = paper_core(Params::default());
-    core.step(&paper_scene(0.0, 8.0, 8.0), 0.0, None).unwrap();
-    let plain = core.choice().safety_preference;
-    let mut core = paper_core(Params::default());
-    let mut scene = paper_scene(0.0, 8.0, 8.0);
-    scene.agents[0].intent.task = Some(Rated {
-        value: Task::Emergency,
-        confidence: 0.9,
+    let plain = safety_preference_with(|_| {});
+    let stated = safety_preference_with(|i| {
+        i.task = Some(Rated {
+            value: Task::Emergency,
+            confidence: 0.9,
+        })
     });
-    core.step(&scene, 0.0, None).unwrap();
     let gain = ChoiceParams::default().other_task_safety[Task::Emergency as usize];
     assert!(gain > 0.0);
     assert!(
-        (core.choice().safety_preference - (plain + gain)).abs() < EPS,
-        "{plain} + {gain} != {}",
-        core.choice().safety_preference
+        (stated - (plain + gain)).abs() < EPS,
+        "{plain} + {gain} != {stated}"
     );
 }
 

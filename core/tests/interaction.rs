@@ -770,15 +770,21 @@ fn approaching(d: f64, v: f64, y: f64) -> ConflictPair {
     c
 }
 
+/// A waiting ego that has just asked car 7, 40 m out at 8 m/s, to let it go first (at t = 0):
+/// it would stop at 0.89 m/s² after its reaction, gentle enough to ask, and it would reach
+/// the crossing before the ego could have crossed with pet_go_s to spare.
+fn asked(ip: &InteractionParams) -> Negotiation {
+    let mut n = Negotiation::default();
+    n.update(&[approaching(40.0, 8.0, 0.0)], |_| 7, &ego(0.0), 0.0, ip);
+    assert_eq!(n.phase, Phase::Announced);
+    n
+}
+
 #[test]
 fn a_waiting_ego_asks_a_car_that_can_stop_gently_and_goes_once_it_brakes() {
     let ip = InteractionParams::default();
     let id = |_| 7;
-    let mut n = Negotiation::default();
-    // 40 m out at 8 m/s it would stop at 0.89 m/s² after its reaction: gentle enough to ask,
-    // and it would reach the crossing before the ego could have crossed with pet_go_s to spare.
-    n.update(&[approaching(40.0, 8.0, 0.0)], id, &ego(0.0), 0.0, &ip);
-    assert_eq!(n.phase, Phase::Announced);
+    let mut n = asked(&ip);
     assert!(n.announces() && !n.yielded(7));
     // Watched for less than watch_s, it has not answered yet.
     n.update(&[approaching(36.0, 8.0, 0.0)], id, &ego(0.0), 0.5, &ip);
@@ -801,9 +807,7 @@ fn a_waiting_ego_asks_a_car_that_can_stop_gently_and_goes_once_it_brakes() {
 fn a_car_that_keeps_coming_after_the_request_is_let_through_and_not_asked_again() {
     let ip = InteractionParams::default();
     let id = |_| 7;
-    let mut n = Negotiation::default();
-    n.update(&[approaching(40.0, 8.0, 0.0)], id, &ego(0.0), 0.0, &ip);
-    assert_eq!(n.phase, Phase::Announced);
+    let mut n = asked(&ip);
     // After watch_s at its speed it could no longer stop gently: it has answered no.
     n.update(&[approaching(24.0, 8.0, 0.0)], id, &ego(0.0), 2.0, &ip);
     assert_eq!(n.phase, Phase::Idle);
@@ -816,16 +820,13 @@ fn a_car_that_keeps_coming_after_the_request_is_let_through_and_not_asked_again(
 fn a_car_that_slows_after_the_request_complies_even_if_it_brakes_later_than_asked() {
     let ip = InteractionParams::default();
     let id = |_| 7;
-    let mut n = Negotiation::default();
-    n.update(&[approaching(40.0, 8.0, 0.0)], id, &ego(0.0), 0.0, &ip);
-    assert_eq!(n.phase, Phase::Announced);
+    let mut n = asked(&ip);
     // 2 s later, 14 m out at 6.5 m/s: it needs 1.96 m/s² after its reaction, but it has slowed
     // by 0.75 m/s² on average since the request (a driver's IDM brakes harder near its line).
     n.update(&[approaching(14.0, 6.5, 0.0)], id, &ego(0.0), 2.0, &ip);
     assert_eq!(n.phase, Phase::Announced);
     // Slowed by less than 0.3 m/s² on average: it keeps coming.
-    let mut n = Negotiation::default();
-    n.update(&[approaching(40.0, 8.0, 0.0)], id, &ego(0.0), 0.0, &ip);
+    let mut n = asked(&ip);
     n.update(&[approaching(14.0, 7.5, 0.0)], id, &ego(0.0), 2.0, &ip);
     assert_eq!(n.phase, Phase::Idle);
 }
