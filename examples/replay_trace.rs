@@ -155,14 +155,15 @@ fn main() {
             for step in [0, 5, 10, 20, 30] {
                 let boxes: Vec<String> = occ
                     .boxes(step)
-                    .map(|(s0, s1, l0, l1, m)| {
-                        format!(
-                            "s[{s0:.1},{s1:.1}] l[{l0:.1},{l1:.1}]{}",
-                            if m { " pet" } else { "" }
-                        )
-                    })
+                    .map(|(s0, s1, l0, l1)| format!("s[{s0:.1},{s1:.1}] l[{l0:.1},{l1:.1}]"))
                     .collect();
                 println!("   boxes at step {step}: {}", boxes.join("  "));
+            }
+            for m in core.planner().margins() {
+                println!(
+                    "   margin: s[{:.1},{:.1}] during ({:.2}, {:.2}) s",
+                    m.s[0], m.s[1], m.t[0], m.t[1]
+                );
             }
             println!(
                 "   yields {:.2?} forecasts {:?}",

@@ -290,11 +290,14 @@ impl DecisionCore {
         for (i, a) in scene.agents().iter().enumerate() {
             self.processes[i] = ProcessState::of(a, &self.morph, p.opm.lane_match_heading_rad);
         }
+        let lane = *self.morph.lane(scene.ego_lane);
+        let start = frenet_start(&scene.ego, &lane, &p);
         opm::build(
             scene,
             &self.morph,
             &p.opm,
             &p.interaction,
+            p.ego_comfort_stop_m(start.ds, start.dds),
             &self.processes,
             &self.history,
             &mut self.triplet,
@@ -309,8 +312,6 @@ impl DecisionCore {
             &mut self.saliency,
         );
 
-        let lane = *self.morph.lane(scene.ego_lane);
-        let start = frenet_start(&scene.ego, &lane, &p);
         let agents = scene.agents();
         self.negotiation.update(
             self.conflicts.pairs(),
@@ -325,7 +326,7 @@ impl DecisionCore {
         );
         self.expect(agents);
         let (yield_distance, clear_distance, every_lane) =
-            self.yield_point(start.s, start.ds.max(0.0));
+            self.yield_point(start.s, start.ds.max(0.0), start.dds);
         let ctx = self.ego_context(&lane, &start, yield_distance);
         choice::choose(
             &self.triplet,
@@ -658,7 +659,7 @@ impl DecisionCore {
             ddl: 0.0,
         };
         let lane = *self.morph.lane(self.ego_lane);
-        let stop = self.yield_point(q.s, q.speed.max(0.0)).0;
+        let stop = self.yield_point(q.s, q.speed.max(0.0), q.accel).0;
         let mut d = Decision {
             cycle: self.last.cycle,
             request_id: self.last.request_id,
@@ -698,22 +699,23 @@ impl DecisionCore {
         }
     }
 
-    /// Where a yielding ego at arc length `s` and speed `v` stops, and past where it has
-    /// cleared what it yields to, as distances from `s` (both ∞ when there is nothing to
-    /// yield at), and whether the stop point is outside every zone of its lane (else only
-    /// outside those of lanes with traffic). It stops the stop margin before the nearest conflict zone ahead whose road
-    /// user is arriving (TTC below the cap) and that it can still stop before at the
-    /// comfortable deceleration; a zone it can no longer stop before is one it clears. A stop
+    /// Where a yielding ego at arc length `s`, speed `v` and acceleration `a` stops, and past
+    /// where it has cleared what it yields to, as distances from `s` (both ∞ when there is
+    /// nothing to yield at), and whether the stop point is outside every zone of its lane
+    /// (else only outside those of lanes with traffic). It stops the stop margin before the
+    /// nearest conflict zone ahead whose road user is arriving (TTC below the cap) and that it
+    /// can still stop before comfortably ([`Params::ego_comfort_stop_m`]); a zone it can no
+    /// longer stop before is one it clears. A stop
     /// point that would leave the footprint inside, or within the margin of, another conflict
     /// zone of its lane moves back before that zone ("don't block the box"). When the ego is
     /// already past every such point, only the zones of lanes with traffic count (it stops
     /// where it blocks nobody now); when that is past stopping too, there is no point to yield
     /// at. It has cleared once past that conflict zone and every zone of its lane that begins
     /// before that zone ends. An ego within the margin past a stop point stops where it is.
-    fn yield_point(&self, s: f64, v: f64) -> (f64, f64, bool) {
+    fn yield_point(&self, s: f64, v: f64, a: f64) -> (f64, f64, bool) {
         let p = &self.params;
         let margin = p.trajectory.stop_margin_m;
-        let reach = p.interaction.comfort_stop_m(v);
+        let reach = p.ego_comfort_stop_m(v, a);
         // A stop point up to the margin behind the ego still keeps it out of the zone: it stops
         // where it is (a creep that overshot a point by a centimetre must not turn into
         // clearing the junction).

@@ -194,14 +194,16 @@ struct Candidate {
 }
 
 /// Builds the triplet of `scene` into `out` (object selection of §3.1 and eq. 4–6, implicit
-/// intents of §4.1). `processes` holds P_ti of every agent, in scene order, and `history` their
-/// tracks; `all` receives every conflict pair.
+/// intents of §4.1). `ego_stop_m` is the distance the ego needs to stop comfortably
+/// ([`crate::params::Params::ego_comfort_stop_m`]), `processes` holds P_ti of every agent, in
+/// scene order, and `history` their tracks; `all` receives every conflict pair.
 #[allow(clippy::too_many_arguments)]
 pub fn build(
     scene: &Scene,
     morph: &Morphology,
     p: &OpmParams,
     ip: &InteractionParams,
+    ego_stop_m: f64,
     processes: &[ProcessState; MAX_AGENTS],
     history: &History,
     out: &mut OpmTriplet,
@@ -258,12 +260,12 @@ pub fn build(
                 // A road user that has crossed the ego's lane and left its zone stays in
                 // conflict until `pet_behind_s` after it left its passage (at its speed, at
                 // least 0.1 m/s): the margin the ego keeps behind it (`choice::conflict_risk`,
-                // the planner's margins) holds until then, while the ego can still stop before
-                // its own passage braking at `comfort_decel_mps2` (a committed ego planned that
-                // margin before the car left, on its predicted exit). One that merged into the
+                // the planner's margins) holds until then, while the ego can still stop
+                // comfortably before its own passage (`ego_stop_m`; a committed ego planned
+                // that margin before the car left, on its predicted exit). One that merged into the
                 // ego's lane ahead is its leader: car following keeps that distance.
                 let left_s = -own(cp.pass_b[1]) / process.speed_mps.max(0.1);
-                let committed = ip.comfort_stop_m(ego_speed) > rel(cp.pass_a[0]);
+                let committed = ego_stop_m > rel(cp.pass_a[0]);
                 let gone =
                     left_s >= ip.pet_behind_s || committed || cp.kind != ConflictKind::Crossing;
                 if ego_zone[1] < 0.0 || (agent_zone[1] < 0.0 && gone) {

@@ -268,7 +268,7 @@ impl Default for InteractionParams {
             proceed_min_speed_mps: 2.0,
             proceed_top_speed_mps: 14.0,
             pet_go_s: 2.0,
-            pet_behind_s: 1.6,
+            pet_behind_s: 1.8,
             max_imposed_decel_mps2: 3.0,
             reaction_s: 0.5,
             trust_yield: 0.8,
@@ -473,6 +473,27 @@ const TINY: f64 = 1e-3;
 const WEIGHT: f64 = 1e3;
 
 impl Params {
+    /// Distance the ego needs to stop comfortably from `v` m/s at acceleration `a` m/s², m:
+    /// its braking ramps from `a` to `comfort_decel_mps2` at the jerk limit `max_jerk_mps3`,
+    /// as a planned stop must, then holds. Nearer than that to its passage, the ego is
+    /// committed (at 1.9 m/s from a = 0, 0.88 m where v²/2b gives 0.60 m).
+    pub fn ego_comfort_stop_m(&self, v: f64, a: f64) -> f64 {
+        let (b, j) = (
+            self.interaction.comfort_decel_mps2,
+            self.trajectory.max_jerk_mps3,
+        );
+        let (v, a) = (v.max(0.0), a.max(-b));
+        let ramp = (a + b) / j;
+        let speed_at = |t: f64| v + a * t - 0.5 * j * t * t;
+        let covered = |t: f64| v * t + 0.5 * a * t * t - j * t * t * t / 6.0;
+        if speed_at(ramp) > 0.0 {
+            covered(ramp) + speed_at(ramp) * speed_at(ramp) / (2.0 * b)
+        } else {
+            // At rest within the ramp.
+            covered((a + libm::sqrt(a * a + 2.0 * j * v)) / j)
+        }
+    }
+
     /// Every number of the core with its allowed closed range [min, max]: positive where a
     /// division or a normaliser needs it, bounded where a conversion to cycles or nanoseconds
     /// or the fixed buffers need it. Array parameters appear once per element.

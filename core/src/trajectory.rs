@@ -44,7 +44,8 @@ const DRIVE_ON_STEPS: f64 = 3.0;
 const FRAME_BINS: usize = 256;
 /// Below this speed at the end of the horizon a candidate stands, m/s.
 const STANDING_MPS: f64 = 0.3;
-/// Most time steps a post-encroachment margin spans on each side.
+/// Most time steps before now and past the horizon searched for another road user's passage
+/// (its post-encroachment margins reach that far).
 pub const MAX_SWEEP_STEPS: usize = 48;
 
 /// s(t) = a₀ + a₁t + a₂t² + a₃t³ + a₄t⁴ (eq. 17).
@@ -167,10 +168,20 @@ pub struct FrenetState {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Hit {
     Free,
-    /// Only a post-encroachment margin around where another road user is or will be.
-    Margin,
     /// Another road user's footprint (with its clearance).
     Contact,
+}
+
+/// A post-encroachment margin: while another road user is, was or will be in its passage of
+/// a conflict zone, the ego keeps its centre out of its own passage of that zone, at any
+/// lateral offset.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PassageMargin {
+    /// The ego's passage, arc length along its lane, m.
+    pub s: [f64; 2],
+    /// When the ego may not be in it, s from now: from `pet_s[1]` before the other enters its
+    /// passage until `pet_s[0]` after it has left it ([`Forecast::pet_s`]).
+    pub t: [f64; 2],
 }
 
 /// The other road user's predicted footprint behind an occupancy box: centre, heading
@@ -354,8 +365,8 @@ fn rectangles_overlap(
     })
 }
 
-/// Boxes in (s, l) that the ego's reference point may not enter, per time step: footprints,
-/// and post-encroachment margins (flagged). A footprint box is the broad phase: a point inside
+/// Boxes in (s, l) that the ego's reference point may not enter, per time step: the others'
+/// footprints. A footprint box is the broad phase: a point inside
 /// one is a contact only when the ego's rectangle placed there overlaps the other's predicted
 /// rectangle with its clearance (boxes in a curved lane's frame are larger than the cars, and
 /// a car in the opposite lane beside the start of a turn would otherwise touch a car standing
@@ -366,7 +377,6 @@ pub struct Occupancy {
     s_hi: [[f64; MAX_BOXES]; MAX_STEPS],
     l_lo: [[f64; MAX_BOXES]; MAX_STEPS],
     l_hi: [[f64; MAX_BOXES]; MAX_STEPS],
-    margin: [[bool; MAX_BOXES]; MAX_STEPS],
     /// The footprint of a box that holds one road user's, for the exact test.
     footprint: [[Option<Footprint>; MAX_BOXES]; MAX_STEPS],
     n: [u8; MAX_STEPS],
@@ -388,7 +398,6 @@ impl Default for Occupancy {
             s_hi: [[0.0; MAX_BOXES]; MAX_STEPS],
             l_lo: [[0.0; MAX_BOXES]; MAX_STEPS],
             l_hi: [[0.0; MAX_BOXES]; MAX_STEPS],
-            margin: [[false; MAX_BOXES]; MAX_STEPS],
             footprint: [[None; MAX_BOXES]; MAX_STEPS],
             n: [0; MAX_STEPS],
             step_lo: [f64::INFINITY; MAX_STEPS],
@@ -409,14 +418,12 @@ impl Occupancy {
         self.step_hi[..steps].fill(f64::NEG_INFINITY);
     }
 
-    /// Adds a box at `step` (`margin`: a post-encroachment margin, not a footprint; `footprint`:
-    /// the one road user's rectangle behind a footprint box; where it is not exact, the box is
-    /// where the rectangles are tested). A box inside another that blocks at least as much is
-    /// dropped (a footprint box that covers another footprint's loses its rectangle and blocks
-    /// all of itself; one whose rectangle decides covers nothing); when the step is full, it is
-    /// merged into the box whose area grows least, one of its own kind if there is one (a
-    /// footprint merged with a margin stays a footprint; a merged box loses its rectangle).
-    #[allow(clippy::too_many_arguments)]
+    /// Adds a box at `step` (`footprint`: the one road user's rectangle behind it; where it is
+    /// not exact, the box is where the rectangles are tested; `None`: all of the box blocks). A
+    /// box inside another that blocks at least as much is dropped (a box that covers another
+    /// footprint's loses its rectangle and blocks all of itself; one whose rectangle decides
+    /// covers nothing); when the step is full, it is merged into the box whose area grows
+    /// least (a merged box loses its rectangle).
     fn add(
         &mut self,
         step: usize,
@@ -424,16 +431,14 @@ impl Occupancy {
         s_hi: f64,
         l_lo: f64,
         l_hi: f64,
-        margin: bool,
         footprint: Option<Footprint>,
     ) {
         let k = self.n[step] as usize;
         // A box whose rectangles decide does not block all of itself: it covers only its own
         // footprint again.
         let covering = (0..k).find(|&b| {
-            (margin || !self.margin[step][b])
-                && (self.footprint[step][b].is_none_or(|f| f.exact)
-                    || (!margin && self.footprint[step][b] == footprint))
+            (self.footprint[step][b].is_none_or(|f| f.exact)
+                || self.footprint[step][b] == footprint)
                 && self.s_lo[step][b] <= s_lo
                 && self.s_hi[step][b] >= s_hi
                 && self.l_lo[step][b] <= l_lo
@@ -442,7 +447,7 @@ impl Occupancy {
         if let Some(b) = covering {
             // A footprint inside another footprint's box: the covering box keeps both by
             // blocking all of itself.
-            if !margin && self.footprint[step][b] != footprint {
+            if self.footprint[step][b] != footprint {
                 self.footprint[step][b] = None;
             }
             return;
@@ -452,21 +457,19 @@ impl Occupancy {
             self.s_hi[step][k] = s_hi;
             self.l_lo[step][k] = l_lo;
             self.l_hi[step][k] = l_hi;
-            self.margin[step][k] = margin;
             self.footprint[step][k] = footprint;
             self.n[step] += 1;
         } else {
             let mut best = 0;
-            let mut best_cost = (true, f64::INFINITY);
+            let mut best_cost = f64::INFINITY;
             for b in 0..MAX_BOXES {
                 let (b_s_lo, b_s_hi) = (self.s_lo[step][b], self.s_hi[step][b]);
                 let (b_l_lo, b_l_hi) = (self.l_lo[step][b], self.l_hi[step][b]);
                 let merged =
                     (b_s_hi.max(s_hi) - b_s_lo.min(s_lo)) * (b_l_hi.max(l_hi) - b_l_lo.min(l_lo));
                 let growth = merged - (b_s_hi - b_s_lo) * (b_l_hi - b_l_lo);
-                let cost = (self.margin[step][b] != margin, growth);
-                if cost < best_cost {
-                    best_cost = cost;
+                if growth < best_cost {
+                    best_cost = growth;
                     best = b;
                 }
             }
@@ -474,7 +477,6 @@ impl Occupancy {
             self.s_hi[step][best] = self.s_hi[step][best].max(s_hi);
             self.l_lo[step][best] = self.l_lo[step][best].min(l_lo);
             self.l_hi[step][best] = self.l_hi[step][best].max(l_hi);
-            self.margin[step][best] &= margin;
             self.footprint[step][best] = None;
         }
         self.step_lo[step] = self.step_lo[step].min(s_lo);
@@ -487,19 +489,14 @@ impl Occupancy {
         s >= self.step_lo[step] && s <= self.step_hi[step]
     }
 
-    /// What the ego centred at (s, l) meets at `step`: a footprint before a margin.
+    /// What the ego centred at (s, l) meets at `step`.
     #[inline(always)]
     pub fn hit(&self, step: usize, s: f64, l: f64) -> Hit {
         if !self.may_hit(step, s) {
             return Hit::Free;
         }
-        let mut hit = Hit::Free;
         let mut ego = None;
         for b in self.containing(step, s, l) {
-            if self.margin[step][b] {
-                hit = Hit::Margin;
-                continue;
-            }
             let f = match self.footprint[step][b] {
                 Some(f) if !f.exact => f,
                 _ => return Hit::Contact,
@@ -511,7 +508,7 @@ impl Occupancy {
                 return Hit::Contact;
             }
         }
-        hit
+        Hit::Free
     }
 
     /// True when the ego centred at (s, l) at `step` overlaps another road user's predicted
@@ -523,18 +520,17 @@ impl Occupancy {
         let (hl, hw) = self.half;
         let mut ego = None;
         self.containing(step, s, l).any(|b| {
-            !self.margin[step][b]
-                && self.footprint[step][b].is_none_or(|f| {
-                    let (centre, c, s_) = *ego.get_or_insert_with(|| self.frame.pose(s, l));
-                    rectangles_overlap(
-                        centre,
-                        (c, s_),
-                        (hl, hw),
-                        f.centre,
-                        (f.cos, f.sin),
-                        (hl, hw),
-                    )
-                })
+            self.footprint[step][b].is_none_or(|f| {
+                let (centre, c, s_) = *ego.get_or_insert_with(|| self.frame.pose(s, l));
+                rectangles_overlap(
+                    centre,
+                    (c, s_),
+                    (hl, hw),
+                    f.centre,
+                    (f.cos, f.sin),
+                    (hl, hw),
+                )
+            })
         })
     }
 
@@ -549,15 +545,14 @@ impl Occupancy {
         })
     }
 
-    /// Boxes at `step`, as (s_lo, s_hi, l_lo, l_hi, margin).
-    pub fn boxes(&self, step: usize) -> impl Iterator<Item = (f64, f64, f64, f64, bool)> + '_ {
+    /// Boxes at `step`, as (s_lo, s_hi, l_lo, l_hi).
+    pub fn boxes(&self, step: usize) -> impl Iterator<Item = (f64, f64, f64, f64)> + '_ {
         (0..self.n[step] as usize).map(move |b| {
             (
                 self.s_lo[step][b],
                 self.s_hi[step][b],
                 self.l_lo[step][b],
                 self.l_hi[step][b],
-                self.margin[step][b],
             )
         })
     }
@@ -570,9 +565,9 @@ pub struct Forecast {
     pub accel: f64,
     /// It stops this far ahead along its lane, m, braking evenly (∞: it drives on at `accel`).
     pub stop_in_m: f64,
-    /// Post-encroachment margins kept to it, s: [behind, ahead]. While it is in its passage
-    /// of the conflict zone, the ego may not be where it was up to `behind` s before, nor
-    /// where it will be up to `ahead` s after (0 for road users the ego has no conflict with).
+    /// Post-encroachment margins kept to it, s: [behind, ahead]. The ego stays out of its own
+    /// passage from `ahead` s before this road user enters its passage until `behind` s after
+    /// it has left it ([`PassageMargin`]; 0 for road users the ego has no conflict with).
     pub pet_s: [f64; 2],
     /// Its passage of the conflict zone, distances [enter, exit] along its lane from where it
     /// is, m.
@@ -779,6 +774,9 @@ pub struct Planner {
     /// end the horizon standing in one.
     zones: [[f64; 2]; MAX_CONFLICTS],
     n_zones: usize,
+    /// Post-encroachment margins, one per road user in conflict at most.
+    margins: [PassageMargin; MAX_AGENTS],
+    n_margins: usize,
     steps: usize,
     dt: f64,
     // Monte Carlo terminal states, structure of arrays.
@@ -803,6 +801,8 @@ impl Default for Planner {
             yielding: false,
             zones: [[0.0; 2]; MAX_CONFLICTS],
             n_zones: 0,
+            margins: [PassageMargin::default(); MAX_AGENTS],
+            n_margins: 0,
             steps: 0,
             dt: 0.1,
             end_t: [0.0; MAX_SAMPLES],
@@ -813,6 +813,11 @@ impl Default for Planner {
 }
 
 impl Planner {
+    /// This cycle's post-encroachment margins.
+    pub fn margins(&self) -> &[PassageMargin] {
+        &self.margins[..self.n_margins]
+    }
+
     /// Prepares a cycle: start state, curvature caps, the conflict zones of the ego's lane
     /// `lane_id` and the occupancy of `agents` (all valid agents, with their process states and
     /// forecasts). Agents following the ego in its lane are left to keep their own distance.
@@ -901,6 +906,7 @@ impl Planner {
     ) {
         let s0 = self.start.s;
         self.occupancy.clear(self.steps);
+        self.n_margins = 0;
         let half_l = 0.5 * p.vehicle_length_m;
         let half_w = 0.5 * p.vehicle_width_m;
         // Window of the ego's lane that any candidate can reach, and its bounding box.
@@ -931,7 +937,6 @@ impl Planner {
             Vec2::new(min.x - inflate, min.y - inflate),
             Vec2::new(max.x + inflate, max.y + inflate),
         );
-        let lateral_reach = lane.half_width + p.max_lateral_offset_m;
         // How far off the lane the ego's centre can be.
         let ego_reach = self.lateral_bound(p);
         self.occupancy.half = (half_l, half_w);
@@ -955,14 +960,15 @@ impl Planner {
             // The agent's box at every step, and for the post-encroachment margins when it is
             // in its passage of the conflict zone (before now: at its current speed).
             let f = &forecasts[j];
-            // One step more than the margin: candidates are checked at the steps, and one may
-            // enter its passage between two of them.
+            // How far before now and past the horizon its passage can still set a margin
+            // within the horizon (a step more: the passage is found step by step).
             let window = |secs: f64| (libm::ceil(secs / self.dt) as usize + 1).min(MAX_SWEEP_STEPS);
             let (behind, ahead) = (window(f.pet_s[0]), window(f.pet_s[1]));
             let total = behind + self.steps + ahead;
             let v = agent.speed();
             let v_top = p.max_speed_mps.max(v);
-            let mut in_passage: Option<(usize, usize)> = None;
+            // When it enters and leaves its passage, s from now.
+            let mut passage: Option<(f64, f64)> = None;
             // Predictions move at most a few segments per step: after the first global
             // projection, search only segments near the previous foot point.
             let mut near: Option<usize> = None;
@@ -972,10 +978,18 @@ impl Planner {
             let along = |t: f64| forecast_at(t).travel(v, t, v_top);
             for i in 0..total {
                 let t = (i as f64 - behind as f64 + 1.0) * self.dt;
-                // In its passage at any moment of the step (a test at the step's end alone
-                // would shorten the margins by up to a step on each side).
-                if along(t) >= f.pass_m[0] && along(t - self.dt) <= f.pass_m[1] {
-                    in_passage = Some(in_passage.map_or((i, i), |(a, _)| (a, i)));
+                // In its passage at any moment of the step; the moments it enters and leaves
+                // are interpolated within the step (at the step's ends alone, the margins
+                // would depend on where the steps fall, and the plan would flip between
+                // cycles half a step apart).
+                let (a0, a1) = (along(t - self.dt), along(t));
+                if a1 >= f.pass_m[0] && a0 <= f.pass_m[1] {
+                    let at = |x: f64| {
+                        let u = if a1 > a0 { (x - a0) / (a1 - a0) } else { 0.0 };
+                        t - self.dt + self.dt * u.clamp(0.0, 1.0)
+                    };
+                    let leaves = if a1 > f.pass_m[1] { at(f.pass_m[1]) } else { t };
+                    passage = Some((passage.map_or(at(f.pass_m[0]), |(e, _)| e), leaves));
                 }
                 let step = i.wrapping_sub(behind);
                 if step >= self.steps {
@@ -1056,20 +1070,15 @@ impl Planner {
                     exact,
                 };
                 self.occupancy
-                    .add(step, b[0], b[1], b[2], b[3], false, Some(footprint));
+                    .add(step, b[0], b[1], b[2], b[3], Some(footprint));
             }
-            // Margins: the PET is measured on the passages, so from `ahead` before the agent
-            // enters its passage until `behind` after it has left it, the ego keeps its centre
-            // out of all of its own passage, at any lateral offset.
-            let Some((enters, leaves)) = in_passage.filter(|_| f.pet_s != [0.0; 2]) else {
-                continue;
-            };
-            let (s_lo, s_hi) = (s0 + f.ego_pass_m[0], s0 + f.ego_pass_m[1]);
-            let steps = enters.saturating_sub(behind + ahead)..=leaves.min(self.steps - 1);
-            let reach = lateral_reach + half_w;
-            for step in steps {
-                self.occupancy
-                    .add(step, s_lo, s_hi, -reach, reach, true, None);
+            // Margins: the PET is measured on the passages.
+            if let Some((enters, leaves)) = passage.filter(|_| f.pet_s != [0.0; 2]) {
+                self.margins[self.n_margins] = PassageMargin {
+                    s: [s0 + f.ego_pass_m[0], s0 + f.ego_pass_m[1]],
+                    t: [enters - f.pet_s[1], leaves + f.pet_s[0]],
+                };
+                self.n_margins += 1;
             }
         }
     }
@@ -1082,7 +1091,8 @@ impl Planner {
     /// scaling. Its odd samples instead reach the yield point at v_T ~ U(0, v₀) and roll on
     /// (T = 2d / (v₀ + v_T), perturbed the same way): they pass behind a crossing car without
     /// stopping, and `evaluate` keeps them only when they also clear the conflict zone within
-    /// the checked horizon or can still stop before it at its end.
+    /// the checked horizon or can still stop before it at its end. Below `low_speed_mps` they
+    /// stop at the yield point (v_T = 0, T = 2d / v₀).
     pub fn sample(&mut self, nominal: &Profile, n: usize, cycle: u64, p: &TrajectoryParams) {
         let n = n.clamp(1, MAX_SAMPLES);
         let mut rng = SmallRng::seed_from_u64(p.seed ^ cycle.wrapping_mul(0x9E37_79B9_7F4A_7C15));
@@ -1101,7 +1111,12 @@ impl Planner {
             } else {
                 (z(&mut rng), z(&mut rng), z(&mut rng))
             };
-            let (duration, target) = if self.yielding && !low_speed && k % 2 == 1 {
+            let (duration, target) = if self.yielding && low_speed && k % 2 == 1 {
+                // Below the low-speed threshold the nominal may be a creep towards the yield
+                // point: its odd samples stop there instead (a quartic to rest from rest
+                // acceleration covers v₀·T/2), for when the traffic leaves no time to creep on.
+                (2.0 * nominal.stop_m / v0.max(STANDING_MPS), 0.0)
+            } else if self.yielding && k % 2 == 1 {
                 let v_end = v0 * rng.random::<f64>();
                 (nominal.duration * v0 / (v0 + v_end), v_end)
             } else {
@@ -1282,6 +1297,19 @@ impl Planner {
         let mut t_goal = f64::NAN;
         let (mut prev_t, mut prev_s) = (0.0, st.s);
         let s_end = q.pos(t_end);
+        // When the candidate enters and leaves each margin's passage, s (∞: not within the
+        // horizon; one already past the passage never enters it).
+        let margins = if margins {
+            &self.margins[..self.n_margins]
+        } else {
+            &[]
+        };
+        let mut passage = [(f64::INFINITY, f64::INFINITY); MAX_AGENTS];
+        for (m, (enters, _)) in margins.iter().zip(passage.iter_mut()) {
+            if st.s >= m.s[0] && st.s <= m.s[1] {
+                *enters = 0.0;
+            }
+        }
         for step in 0..self.steps {
             let t = (step + 1) as f64 * self.dt;
             let on_poly = t <= t_end;
@@ -1313,10 +1341,19 @@ impl Planner {
             };
             if self.occupancy.may_hit(step, s) {
                 let lat = lat.unwrap_or_else(|| if on_poly { l.pos(t) } else { l_end });
-                match self.occupancy.hit(step, s, lat) {
-                    Hit::Contact => return Err(Reject::Collision(t)),
-                    Hit::Margin if margins => return Err(Reject::Collision(t)),
-                    _ => {}
+                if self.occupancy.hit(step, s, lat) == Hit::Contact {
+                    return Err(Reject::Collision(t));
+                }
+            }
+            // The moments between steps, interpolated: where the steps fall must not decide
+            // whether a candidate keeps a margin (they move by half a step each 50 ms cycle).
+            let at = |x: f64| prev_t + (x - prev_s) / (s - prev_s) * (t - prev_t);
+            for (m, (enters, leaves)) in margins.iter().zip(passage.iter_mut()) {
+                if prev_s < m.s[0] && s >= m.s[0] {
+                    *enters = at(m.s[0]);
+                }
+                if prev_s < m.s[1] && s >= m.s[1] && enters.is_finite() {
+                    *leaves = at(m.s[1]);
                 }
             }
             if t_goal.is_nan() && s >= goal {
@@ -1326,6 +1363,11 @@ impl Planner {
             prev_s = s;
         }
         let horizon = self.steps as f64 * self.dt;
+        for (m, &(enters, leaves)) in margins.iter().zip(&passage) {
+            if enters < m.t[1] && leaves.min(horizon) > m.t[0] {
+                return Err(Reject::Collision(enters.max(m.t[0])));
+            }
+        }
         let v_last = if horizon <= t_end {
             q.vel(horizon)
         } else {
@@ -1694,13 +1736,13 @@ mod tests {
         let mut occ = Occupancy::default();
         for k in 0..MAX_BOXES {
             let s = 10.0 * k as f64;
-            occ.add(0, s, s + 2.0, -1.0, 1.0, false, None);
+            occ.add(0, s, s + 2.0, -1.0, 1.0, None);
         }
-        occ.add(0, 52.5, 53.0, -1.0, 1.0, false, None);
+        occ.add(0, 52.5, 53.0, -1.0, 1.0, None);
         for (k, b) in occ.boxes(0).enumerate() {
             let s = 10.0 * k as f64;
             let end = if k == 5 { 53.0 } else { s + 2.0 };
-            assert_eq!(b, (s, end, -1.0, 1.0, false), "box {k}");
+            assert_eq!(b, (s, end, -1.0, 1.0), "box {k}");
         }
     }
 
@@ -1763,13 +1805,11 @@ mod tests {
     }
 
     #[test]
-    fn a_margin_inside_a_footprint_box_leaves_its_rectangle_exact() {
-        // A car's 10 × 8 m box with its 4.8 × 2 m rectangle at (5, 0), then a margin within
-        // the box and the same footprint again: the ego 3.5 m to the side of the car is inside
-        // the box but clear of the rectangle, so it still meets nothing (had either addition
-        // stripped the box of its rectangle, all of the box would block). The margin is kept
-        // beside it (the box blocks only where the rectangles meet), the same footprint is
-        // not stored twice.
+    fn the_same_footprint_added_again_leaves_its_box_exact() {
+        // A car's 10 × 8 m box with its 4.8 × 2 m rectangle at (5, 0), then the same footprint
+        // again: the ego 3.5 m to the side of the car is inside the box but clear of the
+        // rectangle, so it still meets nothing (had the addition stripped the box of its
+        // rectangle, all of the box would block), and the footprint is not stored twice.
         let mut occ = Occupancy::default();
         for (k, x) in occ.frame.x.iter_mut().enumerate() {
             *x = k as f64;
@@ -1781,12 +1821,11 @@ mod tests {
             grown: 0.0,
             exact: false,
         };
-        occ.add(0, 0.0, 10.0, -4.0, 4.0, false, Some(car));
+        occ.add(0, 0.0, 10.0, -4.0, 4.0, Some(car));
         assert_eq!(occ.hit(0, 5.0, 3.5), Hit::Free);
         assert_eq!(occ.hit(0, 5.0, 1.5), Hit::Contact);
-        occ.add(0, 1.0, 9.0, -1.0, 1.0, true, None);
-        occ.add(0, 0.0, 10.0, -4.0, 4.0, false, Some(car));
-        assert_eq!(occ.boxes(0).count(), 2);
+        occ.add(0, 0.0, 10.0, -4.0, 4.0, Some(car));
+        assert_eq!(occ.boxes(0).count(), 1);
         assert_eq!(occ.hit(0, 5.0, 0.5), Hit::Contact);
         assert_eq!(occ.hit(0, 5.0, 3.5), Hit::Free);
     }
@@ -1940,12 +1979,12 @@ mod tests {
         // one within it on every side is absorbed.
         for (l_lo, l_hi) in [(-1.0, 3.0), (-3.0, 1.0)] {
             let mut occ = Occupancy::default();
-            occ.add(0, 0.0, 10.0, -2.0, 2.0, false, None);
-            occ.add(0, 0.0, 10.0, l_lo, l_hi, false, None);
+            occ.add(0, 0.0, 10.0, -2.0, 2.0, None);
+            occ.add(0, 0.0, 10.0, l_lo, l_hi, None);
             assert_eq!(occ.boxes(0).count(), 2, "{l_lo}..{l_hi}");
             let outside_the_first = if l_hi > 2.0 { 2.5 } else { -2.5 };
             assert_eq!(occ.hit(0, 5.0, outside_the_first), Hit::Contact);
-            occ.add(0, 1.0, 9.0, -1.0, 1.0, false, None);
+            occ.add(0, 1.0, 9.0, -1.0, 1.0, None);
             assert_eq!(occ.boxes(0).count(), 2, "{l_lo}..{l_hi}");
         }
     }

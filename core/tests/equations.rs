@@ -1464,7 +1464,7 @@ fn empty_road_planner(s: f64, v: f64) -> (Planner, Morphology) {
 fn a_footprint_overlapping_another_is_kept_and_a_point_in_it_is_a_contact() {
     // Two standing cars in the ego's lane, 22 and 19 m ahead, on the straight before the
     // turn: the second's box reaches 3 m further back than the first's and is not inside it,
-    // so both block; a point in either is a contact (a footprint, not a margin).
+    // so both block; a point in either is a contact.
     let car = |ahead: f64| car_on_the_turn(ahead, 0.0);
     let (planner, _) = planner_with(&[car(22.0), car(19.0)], 0.0, 5.0, 0.0);
     let boxes: Vec<_> = planner.occupancy.boxes(0).collect();
@@ -1479,7 +1479,7 @@ fn a_footprint_overlapping_another_is_kept_and_a_point_in_it_is_a_contact() {
     // growth along, width + clearance across.
     let p = Params::default().trajectory;
     let grown = p.margin_growth_mps * p.dt_s;
-    for (s_lo, s_hi, l_lo, l_hi, _) in boxes {
+    for (s_lo, s_hi, l_lo, l_hi) in boxes {
         let along = p.vehicle_length_m + p.safety_margin_m + grown;
         assert!(((s_hi - s_lo) / 2.0 - along).abs() < 1e-6);
         assert!(((l_hi - l_lo) / 2.0 - (p.vehicle_width_m + p.safety_margin_m)).abs() < 1e-6);
@@ -1511,11 +1511,10 @@ fn a_car_beside_the_start_of_a_turn_in_the_opposite_lane_is_no_contact() {
     let planner = standing_at_the_turn(&[beside]);
     let s0 = planner.start.s;
     assert!(
-        planner.occupancy.boxes(0).any(|b| !b.4
-            && b.0 <= s0
-            && s0 <= b.1
-            && b.2 <= 0.0
-            && 0.0 <= b.3),
+        planner
+            .occupancy
+            .boxes(0)
+            .any(|b| b.0 <= s0 && s0 <= b.1 && b.2 <= 0.0 && 0.0 <= b.3),
         "the broad box covers the ego's centre"
     );
     assert_eq!(planner.occupancy.hit(0, s0, 0.0), Hit::Free);

@@ -16,7 +16,7 @@ use concord_core::scene::{
     AgentState, ConflictKind, ExplicitIntent, History, IntentAction, Morphology, ProcessState,
     Rated, RightOfWay, Vec2, MAX_AGENTS,
 };
-use concord_core::trajectory::{Forecast, FrenetState, Hit, Planner, Reject};
+use concord_core::trajectory::{Forecast, FrenetState, Hit, PlanStats, Planner, Reject};
 use concord_core::{DecisionCore, Scene};
 use concord_map::{paper, BuiltIn};
 
@@ -335,9 +335,11 @@ fn courtesy_refuses_a_plan_that_makes_the_other_brake_hard() {
 fn an_idm_follower_brakes_for_a_crossing_ego_as_for_a_standing_leader_and_for_a_merging_one_by_its_speed(
 ) {
     // highway-env's intersection traffic: s₀ 7 m centre to centre (3.5 m from its front to
-    // the ego's passage), T 1.5 s, a 6 m/s², b 3 m/s², lanes at 10 m/s.
+    // the ego's passage), T 1.5 s, a 6 m/s², b 3 m/s², lanes at 10 m/s; the kinematic rule
+    // keeps 1.6 s behind the ego.
     let ip = InteractionParams {
         follower: Follower::Idm,
+        pet_behind_s: 1.6,
         follower_min_gap_m: 3.5,
         follower_headway_s: 1.5,
         follower_max_accel_mps2: 6.0,
@@ -627,8 +629,7 @@ fn the_planner_sees_a_car_that_arrives_at_the_crossing_with_the_ego() {
 fn the_planner_keeps_the_margins_in_the_egos_passage_of_the_zone_only() {
     // The ego 10 m along its lane at 6 m/s; a car 20 m ahead of it in that lane at 4 m/s, in
     // its passage of a zone for the whole horizon; the ego's passage of that zone is 25–35 m
-    // ahead. The margin boxes lie there, not along the car's whole path, and span every
-    // lateral offset the ego can take.
+    // ahead. The margin lies there, not along the car's whole path, and holds all along.
     let morph = BuiltIn::PaperIntersection.morphology();
     let p = Params::default().trajectory;
     let s0 = 10.0;
@@ -659,23 +660,15 @@ fn the_planner_keeps_the_margins_in_the_egos_passage_of_the_zone_only() {
         &morph,
         &p,
     );
-    let steps = (p.horizon_s / p.dt_s) as usize;
-    let margins: Vec<_> = (0..steps)
-        .flat_map(|k| planner.occupancy.boxes(k).filter(|b| b.4))
-        .collect();
-    assert!(!margins.is_empty(), "the car gets margin boxes");
-    // At any lateral offset: across the lane and as far out as the ego's centre may go.
-    let reach = morph.lane(paper::CAV_LEFT).half_width + p.max_lateral_offset_m;
-    for (lo, hi, l_lo, l_hi, _) in margins {
-        assert!(
-            lo >= s0 + 25.0 - 1e-9 && hi <= s0 + 35.0 + 1e-9,
-            "a margin box over [{lo:.2}, {hi:.2}] m, outside the passage [35, 45] m"
-        );
-        assert!(
-            l_lo <= -reach && l_hi >= reach,
-            "a margin box over l [{l_lo:.2}, {l_hi:.2}] m, not all of ±{reach} m"
-        );
-    }
+    let margins = planner.margins();
+    assert_eq!(margins.len(), 1, "the car gets a margin: {margins:?}");
+    // In its passage from now (before now it was behind the passage's start, at its speed)
+    // for the whole horizon: from the margin ahead before now until past the horizon and the
+    // margin behind.
+    let m = margins[0];
+    assert_eq!(m.s, [s0 + 25.0, s0 + 35.0]);
+    assert!((m.t[0] + 2.0).abs() < 1e-9, "{m:?}");
+    assert!(m.t[1] > p.horizon_s + 1.6, "{m:?}");
 }
 
 #[test]
@@ -1146,12 +1139,45 @@ fn plain_crossing() -> Morphology {
 /// A planner on [`plain_crossing`]'s first lane, the ego standing with its centre at `x`,
 /// with `agents` (predicted straight on at their speeds) and `forecasts`.
 fn standing_at(x: f64, agents: &[AgentState], forecasts: &[Forecast; MAX_AGENTS]) -> Planner {
+    rolling_at(x, 0.0, agents, forecasts)
+}
+
+/// [`rolling_at`] 10 m before the crossing (the ego's passage ±6 m around it) at `v` m/s, with
+/// a car crossing northwards from y = `car_y` at `car_speed` m/s, in its passage over
+/// `pass_m` of its path, and the default margins.
+fn before_a_crossing_car(v: f64, car_y: f64, car_speed: f64, pass_m: [f64; 2]) -> Planner {
+    let ip = Params::default().interaction;
+    let car = AgentState::moving(
+        1,
+        Vec2::new(0.0, car_y),
+        core::f64::consts::FRAC_PI_2,
+        car_speed,
+    );
+    let mut forecasts = [Forecast::default(); MAX_AGENTS];
+    let x = -10.0;
+    forecasts[0] = Forecast {
+        pet_s: [ip.pet_behind_s, ip.pet_go_s],
+        pass_m,
+        ego_pass_m: [-6.0 - x, 6.0 - x],
+        ..Forecast::default()
+    };
+    rolling_at(x, v, &[car], &forecasts)
+}
+
+/// [`standing_at`], the ego at `v` m/s.
+fn rolling_at(
+    x: f64,
+    v: f64,
+    agents: &[AgentState],
+    forecasts: &[Forecast; MAX_AGENTS],
+) -> Planner {
     let morph = plain_crossing();
     let mut planner = Planner::default();
     planner.prepare(
         0,
         FrenetState {
             s: 60.0 + x,
+            ds: v,
             ..FrenetState::default()
         },
         50.0,
@@ -1240,17 +1266,7 @@ fn the_margins_keep_the_ego_out_of_its_whole_passage() {
     // ego's passage is ±6 m around it; the ego entering its first metre 1 s after the car
     // left (less than pet_behind_s) is refused, though the car's own box does not reach
     // there; entering 2 s after the car left is allowed.
-    let ip = Params::default().interaction;
-    let car = AgentState::moving(1, Vec2::new(0.0, -4.0), core::f64::consts::FRAC_PI_2, 8.0);
-    let mut forecasts = [Forecast::default(); MAX_AGENTS];
-    let x = -10.0;
-    forecasts[0] = Forecast {
-        pet_s: [ip.pet_behind_s, ip.pet_go_s],
-        pass_m: [0.0, 8.0],
-        ego_pass_m: [-6.0 - x, 6.0 - x],
-        ..Forecast::default()
-    };
-    let planner = standing_at(x, &[car], &forecasts);
+    let planner = before_a_crossing_car(0.0, -4.0, 8.0, [0.0, 8.0]);
     let p = Params::default().trajectory;
     // From standing, a quartic to v over T (no acceleration at either end) covers v·T/2: with
     // v = 9/T it is at −5.5 m, in its passage, at T.
@@ -1259,6 +1275,99 @@ fn the_margins_keep_the_ego_out_of_its_whole_passage() {
     assert!(matches!(early, Err(Reject::Collision(_))), "{early:?}");
     let late = reaching(3.2); // from about 3.1 s
     assert!(late.is_ok(), "{late:?}");
+}
+
+#[test]
+fn the_egos_comfortable_stop_ramps_its_braking_at_the_jerk_limit() {
+    // From 1.9 m/s at a = 0, braking ramps to 3 m/s² over 0.3 s at 10 m/s³ (0.525 m, down to
+    // 1.45 m/s), then stops in 0.350 m: 0.875 m, where v²/2b gives 0.60 m. Already braking at
+    // 3 m/s², no ramp: v²/2b. Slow enough to stop within the ramp: v at rest after
+    // t = √(2v/J), having covered v·t − J·t³/6.
+    let p = Params::default();
+    let ramped = 1.9 * 0.3 - 10.0 * 0.027 / 6.0 + 1.45 * 1.45 / 6.0;
+    assert!((p.ego_comfort_stop_m(1.9, 0.0) - ramped).abs() < 1e-9);
+    assert!((p.ego_comfort_stop_m(1.9, -3.0) - 1.9 * 1.9 / 6.0).abs() < 1e-9);
+    let t = (2.0f64 * 0.2 / 10.0).sqrt();
+    assert!((p.ego_comfort_stop_m(0.2, 0.0) - (0.2 * t - 10.0 * t * t * t / 6.0)).abs() < 1e-9);
+    // Accelerating, it needs more.
+    assert!(p.ego_comfort_stop_m(1.9, 1.0) > ramped);
+}
+
+#[test]
+fn an_ego_that_no_planned_stop_keeps_out_of_its_passage_is_not_held_to_the_margin_behind() {
+    // The paper's HDV left its passage 0.5 s ago at 10 m/s. The CAV at 1.9 m/s 0.7 m before
+    // its own: v²/2b (0.60 m) says it could still stop, no braking ramped at the jerk limit
+    // can (0.88 m), so it is committed and no longer in conflict (held to the margin, it had
+    // no feasible plan). 1.0 m before, it can stop, and the margin behind the HDV holds.
+    let m = BuiltIn::PaperIntersection.morphology();
+    let c = m.conflict(paper::CAV_LEFT, paper::HDV_STRAIGHT).unwrap();
+    let hdv_passage = c.zone_b[1] - c.zone_b[0];
+    let in_conflict = |cav_before: f64| {
+        let (mut core, scene) = before_the_crossing(cav_before, 1.9, -(hdv_passage + 5.0));
+        core.step(&scene, 0.0, None).unwrap();
+        !core.conflicts().pairs().is_empty()
+    };
+    assert!(!in_conflict(0.7));
+    assert!(in_conflict(1.0));
+}
+
+#[test]
+fn a_slow_ego_creeping_towards_its_yield_point_can_stop_there_when_the_traffic_leaves_no_gap() {
+    // The ego 4 m before its passage at 1.9 m/s, below the low-speed threshold, yielding 1 m
+    // before it; a car crossing at 6 m/s is in its passage from 1 s to 2.33 s, so the
+    // margins hold the ego's passage until past 4 s. Creeping on at the approach speed, every
+    // candidate reaches the passage within the margins; the samples that stop at the yield
+    // point keep the ego out of it (without them no plan was feasible, and the fallback
+    // braked at 5 m/s² where a gentle stop would do).
+    let p = Params::default().trajectory;
+    let mut planner = before_a_crossing_car(1.9, -10.0, 6.0, [6.0, 14.0]);
+    planner.yield_distance = 3.0;
+    planner.clear_distance = 16.0;
+    let creep = Profile {
+        accel: 1.5,
+        target_speed: 2.0,
+        duration: 3.0,
+        stop_m: 3.0,
+    };
+    planner.sample(&creep, p.samples, 1, &p);
+    let mut stats = PlanStats::default();
+    let best = planner.run(p.samples, &p, &mut stats);
+    let best = best.unwrap_or_else(|| panic!("no feasible plan: {stats:?}"));
+    let stop = best.s.pos(best.duration);
+    assert!(
+        stop <= planner.start.s + 3.0 + 1e-6,
+        "the plan goes {:.2} m, past the yield point",
+        stop - planner.start.s
+    );
+}
+
+#[test]
+fn the_margin_behind_ends_where_it_says_wherever_the_planners_steps_fall() {
+    // The car above leaves its passage at 1 s, so the margin behind it ends at 1 s +
+    // `pet_behind_s`. A candidate entering the ego's passage 10–85 ms after that is taken,
+    // and one entering 10–85 ms before it refused, at every phase of the planner's 0.1 s
+    // steps: where the steps fall used to add up to 0.3 s to the margin, so that a plan
+    // passed and failed on alternate 50 ms cycles (each half a step apart), and a cycle
+    // where none passed braked at the fallback's rate.
+    let planner = before_a_crossing_car(0.0, -4.0, 8.0, [0.0, 8.0]);
+    let (ip, p) = (Params::default().interaction, Params::default().trajectory);
+    // From standing, a quartic to v over T with no acceleration at either end is at
+    // v·T·(τ³ − τ⁴/2), τ = t/T: entering the passage, 4 m ahead, at τ = 0.9 when T = t/0.9.
+    let entering_at = |t: f64| {
+        let t_end = t / 0.9;
+        let v = 4.0 / (t_end * (0.9f64.powi(3) - 0.5 * 0.9f64.powi(4)));
+        planner.evaluate(t_end, v, 0.0, &p)
+    };
+    let end = 1.0 + ip.pet_behind_s;
+    for offset in [0.01, 0.025, 0.04, 0.055, 0.07, 0.085] {
+        let after = entering_at(end + offset);
+        assert!(after.is_ok(), "{offset} s after: {after:?}");
+        let before = entering_at(end - offset);
+        assert!(
+            matches!(before, Err(Reject::Collision(_))),
+            "{offset} s before: {before:?}"
+        );
+    }
 }
 
 /// The paper's CAV `cav_before` m before its crossing with the HDV's lane at `cav_speed`
@@ -1411,7 +1520,7 @@ fn a_car_that_has_left_its_passage_holds_the_margin_behind_it_until_it_has_run_o
         (exit + 0.5).abs() < 1e-9 && (enter + 13.3 / 6.6).abs() < 1e-9,
         "{enter} {exit}"
     );
-    // Entering at 0.8 s is 1.3 s behind it, short of pet_behind_s (1.6 s); at 1.2 s, 1.7 s.
+    // Entering at 0.8 s is 1.3 s behind it, short of pet_behind_s (1.8 s); at 1.4 s, 1.9 s.
     let at = |d: f64| {
         conflict_risk(
             &keep(10.0),
@@ -1422,11 +1531,11 @@ fn a_car_that_has_left_its_passage_holds_the_margin_behind_it_until_it_has_run_o
         )
     };
     assert!(at(8.0) > 0.01, "{}", at(8.0));
-    assert_eq!(at(12.0), 0.0);
+    assert_eq!(at(14.0), 0.0);
 
     // In the core: the paper's HDV 1 m past its passage at 8 m/s (0.125 s ago) is still a
     // conflict, though no longer a risky one (its TTC is 0, the ego's 2.5 s: ΔTTC is below
-    // ΔT_th); 14 m past (1.75 s ago), none.
+    // ΔT_th); 16 m past (2 s ago, more than pet_behind_s), none.
     // The conflict with the paper's HDV `before` m before the crossing at 8 m/s, the CAV 20 m
     // before it at 8 m/s.
     let conflict_at = |before: f64| {
@@ -1452,7 +1561,7 @@ fn a_car_that_has_left_its_passage_holds_the_margin_behind_it_until_it_has_run_o
     let just_left = past(1.0).expect("still in conflict 0.125 s after it left");
     assert!((just_left.agent_pass_m[1] + 1.0).abs() < 1e-6);
     assert!(!just_left.is_risky(&OpmParams::default()));
-    assert!(past(14.0).is_none());
+    assert!(past(16.0).is_none());
 }
 
 /// `held_on_a_free_road` at the defaults (desired speed 13.9 m/s) with `idle_penalty`.
