@@ -1091,8 +1091,8 @@ impl Planner {
     /// scaling. Its odd samples instead reach the yield point at v_T ~ U(0, v₀) and roll on
     /// (T = 2d / (v₀ + v_T), perturbed the same way): they pass behind a crossing car without
     /// stopping, and `evaluate` keeps them only when they also clear the conflict zone within
-    /// the checked horizon or can still stop before it at its end. Below `low_speed_mps` they
-    /// stop at the yield point (v_T = 0, T = 2d / v₀).
+    /// the checked horizon or can still stop before it at its end. Below `low_speed_mps`,
+    /// sample 1 stops at the yield point instead (v_T = 0, T = 2d / v₀).
     pub fn sample(&mut self, nominal: &Profile, n: usize, cycle: u64, p: &TrajectoryParams) {
         let n = n.clamp(1, MAX_SAMPLES);
         let mut rng = SmallRng::seed_from_u64(p.seed ^ cycle.wrapping_mul(0x9E37_79B9_7F4A_7C15));
@@ -1111,12 +1111,16 @@ impl Planner {
             } else {
                 (z(&mut rng), z(&mut rng), z(&mut rng))
             };
-            let (duration, target) = if self.yielding && low_speed && k % 2 == 1 {
-                // Below the low-speed threshold the nominal may be a creep towards the yield
-                // point: its odd samples stop there instead (a quartic to rest from rest
-                // acceleration covers v₀·T/2), for when the traffic leaves no time to creep on.
+            // Below the low-speed threshold the nominal may be a creep towards the yield point:
+            // sample 1 stops there instead (a quartic to rest from rest acceleration covers
+            // v₀·T/2; perturbed only to stop sooner), for when the traffic leaves no time to
+            // creep on. One is enough: near standstill such stops are all alike, and each
+            // feasible one costs a whole horizon's check.
+            let stops = self.yielding && low_speed && k == 1;
+            let zt = if stops { -fabs(zt) } else { zt };
+            let (duration, target) = if stops {
                 (2.0 * nominal.stop_m / v0.max(STANDING_MPS), 0.0)
-            } else if self.yielding && k % 2 == 1 {
+            } else if self.yielding && !low_speed && k % 2 == 1 {
                 let v_end = v0 * rng.random::<f64>();
                 (nominal.duration * v0 / (v0 + v_end), v_end)
             } else {
@@ -1310,6 +1314,8 @@ impl Planner {
                 *enters = 0.0;
             }
         }
+        // Short of every passage, no margin needs a look.
+        let margins_from = margins.iter().fold(f64::INFINITY, |a, m| a.min(m.s[0]));
         for step in 0..self.steps {
             let t = (step + 1) as f64 * self.dt;
             let on_poly = t <= t_end;
@@ -1348,12 +1354,17 @@ impl Planner {
             // The moments between steps, interpolated: where the steps fall must not decide
             // whether a candidate keeps a margin (they move by half a step each 50 ms cycle).
             let at = |x: f64| prev_t + (x - prev_s) / (s - prev_s) * (t - prev_t);
-            for (m, (enters, leaves)) in margins.iter().zip(passage.iter_mut()) {
+            let near = s >= margins_from;
+            for (m, (enters, leaves)) in margins.iter().zip(passage.iter_mut()).filter(|_| near) {
                 if prev_s < m.s[0] && s >= m.s[0] {
                     *enters = at(m.s[0]);
                 }
                 if prev_s < m.s[1] && s >= m.s[1] && enters.is_finite() {
                     *leaves = at(m.s[1]);
+                }
+                // In the passage at some moment of (max(enters, t₀), min(leaves, t, t₁)).
+                if *enters < m.t[1] && leaves.min(t) > m.t[0] {
+                    return Err(Reject::Collision(enters.max(m.t[0])));
                 }
             }
             if t_goal.is_nan() && s >= goal {
@@ -1363,11 +1374,6 @@ impl Planner {
             prev_s = s;
         }
         let horizon = self.steps as f64 * self.dt;
-        for (m, &(enters, leaves)) in margins.iter().zip(&passage) {
-            if enters < m.t[1] && leaves.min(horizon) > m.t[0] {
-                return Err(Reject::Collision(enters.max(m.t[0])));
-            }
-        }
         let v_last = if horizon <= t_end {
             q.vel(horizon)
         } else {
