@@ -4,7 +4,7 @@
 
 use crate::saliency::{FEATURES, FITTED_KEY};
 use crate::scene::InputLimits;
-use crate::trajectory::{MAX_SAMPLES, MAX_STEPS};
+use crate::trajectory::{MAX_SAMPLES, MAX_STEPS, MAX_SWEEP_STEPS};
 
 /// All parameters of the decision core.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Deserialize, serde::Serialize)]
@@ -858,6 +858,21 @@ impl Params {
                 "the request log (256 requests at 0.5 request_period_s apart) must span \
                  advice.deadline_s: need request_period_s >= deadline_s / 127.5",
             );
+        }
+        // The planner searches another road user's passage this many steps before now and
+        // past its horizon; a longer margin would be cut short there.
+        let sweep_s = (MAX_SWEEP_STEPS - 1) as f64 * t.dt_s;
+        for (key, margin) in [
+            ("interaction.pet_go_s", self.interaction.pet_go_s),
+            ("interaction.pet_behind_s", self.interaction.pet_behind_s),
+        ] {
+            if margin > sweep_s + 1e-9 {
+                return bad(
+                    key,
+                    "the planner searches passages 47 steps back and ahead: need \
+                     pet_go_s and pet_behind_s <= 47 trajectory.dt_s",
+                );
+            }
         }
         if t.emergency_brake_mps2 < t.max_brake_mps2 {
             return bad(

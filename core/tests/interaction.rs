@@ -1342,6 +1342,24 @@ fn a_slow_ego_creeping_towards_its_yield_point_can_stop_there_when_the_traffic_l
 }
 
 #[test]
+fn a_margin_longer_than_the_planners_search_for_passages_is_refused() {
+    // The planner looks for a passage 47 steps (4.7 s at 0.1 s) before now and past its
+    // horizon: a car that left its passage 4.9 s ago is not found, so a 5 s margin behind it
+    // would end early.
+    let mut p = Params::default();
+    p.interaction.pet_behind_s = 4.7;
+    assert!(p.validate().is_ok());
+    p.interaction.pet_behind_s = 5.0;
+    assert_eq!(p.validate().unwrap_err().key, "interaction.pet_behind_s");
+    p.trajectory.dt_s = 0.125;
+    p.trajectory.horizon_s = 5.0;
+    assert!(p.validate().is_ok(), "47 steps of 0.125 s cover it");
+    let mut q = Params::default();
+    q.interaction.pet_go_s = 4.8;
+    assert_eq!(q.validate().unwrap_err().key, "interaction.pet_go_s");
+}
+
+#[test]
 fn the_margin_behind_ends_where_it_says_wherever_the_planners_steps_fall() {
     // The car above leaves its passage at 1 s, so the margin behind it ends at 1 s +
     // `pet_behind_s`. A candidate entering the ego's passage 10–85 ms after that is taken,
