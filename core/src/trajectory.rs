@@ -1354,17 +1354,18 @@ impl Planner {
             // The moments between steps, interpolated: where the steps fall must not decide
             // whether a candidate keeps a margin (they move by half a step each 50 ms cycle).
             let at = |x: f64| prev_t + (x - prev_s) / (s - prev_s) * (t - prev_t);
-            let near = s >= margins_from;
-            for (m, (enters, leaves)) in margins.iter().zip(passage.iter_mut()).filter(|_| near) {
-                if prev_s < m.s[0] && s >= m.s[0] {
-                    *enters = at(m.s[0]);
-                }
-                if prev_s < m.s[1] && s >= m.s[1] && enters.is_finite() {
-                    *leaves = at(m.s[1]);
-                }
-                // In the passage at some moment of (max(enters, t₀), min(leaves, t, t₁)).
-                if *enters < m.t[1] && leaves.min(t) > m.t[0] {
-                    return Err(Reject::Collision(enters.max(m.t[0])));
+            if s >= margins_from {
+                for (m, (enters, leaves)) in margins.iter().zip(passage.iter_mut()) {
+                    if prev_s < m.s[0] && s >= m.s[0] {
+                        *enters = at(m.s[0]);
+                    }
+                    if prev_s < m.s[1] && s >= m.s[1] && enters.is_finite() {
+                        *leaves = at(m.s[1]);
+                    }
+                    // In the passage at some moment of (max(enters, t₀), min(leaves, t, t₁)).
+                    if *enters < m.t[1] && leaves.min(t) > m.t[0] {
+                        return Err(Reject::Collision(enters.max(m.t[0])));
+                    }
                 }
             }
             if t_goal.is_nan() && s >= goal {
