@@ -105,7 +105,7 @@ impl Default for Profile {
 }
 
 impl Profile {
-    /// True when the profile stops before a conflict zone.
+    /// True when the profile stops before a conflict zone or behind a stopping leader.
     pub fn yields(&self) -> bool {
         self.stop_m.is_finite()
     }
@@ -152,7 +152,7 @@ impl Profile {
 }
 
 /// What the choice stage needs to know about the ego's situation.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EgoContext {
     /// Speed, m/s.
     pub speed: f64,
@@ -162,6 +162,10 @@ pub struct EgoContext {
     pub speed_cap: f64,
     /// Distance to the point where a yielding ego must stop, m (∞ when nothing to yield to).
     pub yield_distance: f64,
+    /// Distance to where the ego stops behind its car-following leader should the leader
+    /// stop as forecast, m: ∞ without a leader, for one that does not brake, and for one
+    /// whose stop is beyond a single stopping polynomial's reach (the ego has time to slow).
+    pub leader_stop_m: f64,
     /// Distance whose traversal measures efficiency: through the nearest conflict zone ahead,
     /// or the reference distance when there is none, m.
     pub goal_distance: f64,
@@ -174,6 +178,25 @@ pub struct EgoContext {
     /// Time into a plan at which a yielding ego must still be able to stop before its yield
     /// point (`trajectory.yield_check_s`), s.
     pub yield_check_s: f64,
+}
+
+impl Default for EgoContext {
+    /// Standing, nothing ahead to stop behind, everything else 0.
+    fn default() -> Self {
+        EgoContext {
+            speed: 0.0,
+            accel: 0.0,
+            speed_cap: 0.0,
+            yield_distance: 0.0,
+            leader_stop_m: f64::INFINITY,
+            goal_distance: 0.0,
+            route: Turn::default(),
+            max_brake: 0.0,
+            min_duration: 0.0,
+            max_duration: 0.0,
+            yield_check_s: 0.0,
+        }
+    }
 }
 
 /// Below this speed the ego counts as stopped for the idle penalty (and below
@@ -224,7 +247,7 @@ pub fn profile(m: Maneuver, ctx: &EgoContext, p: &ChoiceParams) -> Profile {
         Maneuver::KeepSpeed => toward(v0),
         Maneuver::TurnLeft | Maneuver::TurnRight => toward(cap),
         Maneuver::Decelerate => {
-            let d = ctx.yield_distance;
+            let d = ctx.yield_distance.min(ctx.leader_stop_m);
             // The approach speed v_a from which the ego, holding v_a for the yield check time
             // τ and then braking at `decelerate_mps2` (b), stops at the yield point:
             // v_a·τ + v_a²/(2b) = d. Near the point this is a creep.

@@ -101,12 +101,7 @@ impl Motion {
     pub fn of(agent: &AgentState, track: Option<&Track>, now: f64, p: &InteractionParams) -> Self {
         let speed = agent.speed();
         let reported = agent.longitudinal_accel();
-        let trend = track.and_then(|t| {
-            let old = t.sample_ago(now, TREND_SPAN_S)?;
-            let span = now - old.time_s;
-            (span >= TREND_MIN_SPAN_S).then(|| (speed - old.vel.norm()) / span)
-        });
-        let (decel, accel) = match (trend, reported == 0.0) {
+        let (decel, accel) = match (speed_trend(agent, track, now), reported == 0.0) {
             (Some(t), true) => ((-t).max(0.0), t),
             (Some(t), false) => ((-t).min(-reported).max(0.0), t.max(reported)),
             (None, _) => ((-reported).max(0.0), reported),
@@ -132,6 +127,25 @@ impl Motion {
             accel,
             standing_s,
         }
+    }
+}
+
+/// Speed trend of `agent` over the last [`TREND_SPAN_S`] of its history, m/s² (`None` with
+/// less than [`TREND_MIN_SPAN_S`] of it).
+fn speed_trend(agent: &AgentState, track: Option<&Track>, now: f64) -> Option<f64> {
+    let old = track?.sample_ago(now, TREND_SPAN_S)?;
+    let span = now - old.time_s;
+    (span >= TREND_MIN_SPAN_S).then(|| (agent.speed() - old.vel.norm()) / span)
+}
+
+/// Acceleration of `agent` along its travel now, m/s², for its forecast: the reported one, or
+/// the braking its speed trend shows when the source reports none (exactly 0; 0 without a
+/// trend). A trend's speeding up is not extrapolated: read from a car behind the ego, it
+/// would drive that car into every plan.
+pub fn current_accel(agent: &AgentState, track: Option<&Track>, now: f64) -> f64 {
+    match agent.longitudinal_accel() {
+        0.0 => speed_trend(agent, track, now).map_or(0.0, |t| t.min(0.0)),
+        reported => reported,
     }
 }
 

@@ -324,7 +324,7 @@ impl DecisionCore {
             scene.time_s,
             &p.interaction,
         );
-        self.expect(agents);
+        self.expect(agents, scene.time_s);
         let (yield_distance, clear_distance, every_lane) =
             self.yield_point(start.s, start.ds.max(0.0), start.dds);
         let ctx = self.ego_context(&lane, &start, yield_distance);
@@ -543,6 +543,24 @@ impl DecisionCore {
         }
     }
 
+    /// Distance, m, to where an ego at `v0` m/s stops behind its car-following leader should
+    /// the leader stop as forecast ([`Forecast::stop_distance`]): the centre gap less a car
+    /// length and `stop_margin_m`, plus the leader's stopping distance. ∞ without a leader or
+    /// when that point is beyond one stopping polynomial (half of `v0 · max_duration_s`):
+    /// "decelerate" stops there ([`choice::profile`]).
+    fn leader_stop(&self, v0: f64) -> f64 {
+        let t = &self.params.trajectory;
+        self.triplet.leader.map_or(f64::INFINITY, |l| {
+            let d = l.gap_m - t.vehicle_length_m - t.stop_margin_m
+                + self.forecasts[l.agent as usize].stop_distance(l.speed_mps);
+            if 2.0 * d <= v0 * t.max_duration_s {
+                d.max(0.0)
+            } else {
+                f64::INFINITY
+            }
+        })
+    }
+
     /// Distance, m, within which the ego must stop behind its car-following leader should the
     /// leader brake at `emergency_brake_mps2` from now: the centre gap less a car length and
     /// `stop_margin_m`, plus the leader's own stopping distance (∞ without a leader): where the
@@ -583,12 +601,14 @@ impl DecisionCore {
     /// The planner forecasts a stop before its zone when it yields with at least
     /// `trust_yield` and needs no more than `max_imposed_decel_mps2` for it (courtesy: the
     /// ego does not count on harder braking); otherwise it drives on at the acceleration its
-    /// motion shows.
-    fn expect(&mut self, agents: &[scene::AgentState]) {
+    /// motion shows: a conflicting road user's as its implicit intent reads it, any other's
+    /// (a leader's) as [`intent::current_accel`] gives it, its speed trend when the source
+    /// reports no acceleration.
+    fn expect(&mut self, agents: &[scene::AgentState], now: f64) {
         let ip = &self.params.interaction;
         for (j, a) in agents.iter().enumerate() {
             self.forecasts[j] = Forecast {
-                accel: a.longitudinal_accel(),
+                accel: intent::current_accel(a, self.history.track(a.id), now),
                 ..Forecast::default()
             };
         }
@@ -690,6 +710,7 @@ impl DecisionCore {
             speed_cap: curve_speed_cap(lane, start.s, look, &p.trajectory)
                 .min(p.choice.desired_speed_mps),
             yield_distance,
+            leader_stop_m: self.leader_stop(v0),
             goal_distance: self.goal_distance(),
             route: lane.turn,
             max_brake: p.trajectory.max_brake_mps2,

@@ -591,6 +591,19 @@ impl Default for Forecast {
 }
 
 impl Forecast {
+    /// Distance it covers from speed `v` to a standstill, m (∞ when it does not brake).
+    pub fn stop_distance(&self, v: f64) -> f64 {
+        if self.stop_in_m.is_finite() {
+            self.stop_in_m.max(0.0)
+        } else if v < 1e-6 {
+            0.0
+        } else if self.accel < 0.0 {
+            v * v / (-2.0 * self.accel)
+        } else {
+            f64::INFINITY
+        }
+    }
+
     /// Distance covered in `t` s from speed `v`, m, at most `v_top` m/s.
     pub fn travel(&self, v: f64, t: f64, v_top: f64) -> f64 {
         if self.stop_in_m.is_finite() {

@@ -8,7 +8,7 @@ use concord_core::choice::{
     choose, conflict_risk, efficiency, expected_wait, imposed_decel, ChoiceHistory, ChoiceOutcome,
     EgoContext, Maneuver, Profile,
 };
-use concord_core::intent::{infer, Motion, Stated};
+use concord_core::intent::{current_accel, infer, Motion, Stated};
 use concord_core::negotiation::{EgoState, EhmiDisplay, Negotiation, Phase};
 use concord_core::opm::{ConflictPair, ConflictSet, OpmTriplet};
 use concord_core::params::{ChoiceParams, Follower, InteractionParams, OpmParams, Params};
@@ -1636,4 +1636,103 @@ fn a_crawl_that_passes_behind_everyone_does_not_make_the_way_free() {
     assert_eq!(with.safety[k], 1.0, "the crawl passes behind");
     assert!(with.safety[Maneuver::TurnLeft.index()] < 0.99);
     assert_eq!(with.utility[d], without.utility[d]);
+}
+
+/// The CAV at 8 m/s on the paper's left turn behind a car that brakes at 2.5 m/s² from 6 m/s,
+/// 21 m ahead at 0 s, whose source reports no acceleration (exactly 0, as highway-env's
+/// observations): scenes every 0.1 s up to 1 s, when the car is at 3.5 m/s, 16.25 m ahead.
+/// Returns the core, the last scene and where the car then stops, m along the lane.
+fn behind_a_leader_braking_unreported() -> (Box<DecisionCore>, Scene, f64) {
+    let mut core = paper_core(Params::default());
+    let m = *core.morphology();
+    let lane = *m.lane(paper::CAV_LEFT);
+    let (s_cross, _) = m
+        .conflict_between(paper::CAV_LEFT, paper::HDV_STRAIGHT)
+        .unwrap();
+    let s0 = s_cross - 45.0;
+    let at = |t: f64| {
+        let (ego, h, _) = lane.pose_at(s0 + 8.0 * t, 0);
+        let leader_s = s0 + 21.0 + 6.0 * t - 1.25 * t * t;
+        let (car, hc, _) = lane.pose_at(leader_s, 0);
+        let mut scene = Scene::new(t, AgentState::moving(0, ego, h, 8.0), paper::CAV_LEFT);
+        scene.push(AgentState::moving(1, car, hc, 6.0 - 2.5 * t));
+        (scene, leader_s)
+    };
+    for k in 0..10 {
+        let t = k as f64 * 0.1;
+        core.step(&at(t).0, t, None).unwrap();
+    }
+    let (scene, leader_s) = at(1.0);
+    (core, scene, leader_s + 3.5 * 3.5 / 5.0)
+}
+
+#[test]
+fn a_leader_whose_source_reports_no_acceleration_is_forecast_at_its_speed_trend() {
+    let (mut core, scene, _) = behind_a_leader_braking_unreported();
+    core.step(&scene, 1.0, None).unwrap();
+    let f = core.forecasts()[0];
+    assert!((f.accel + 2.5).abs() < 0.05, "{f:?}");
+    assert!((f.stop_distance(3.5) - 2.45).abs() < 0.05, "{f:?}");
+    // A trend's speeding up is not extrapolated; a reported acceleration is taken as is.
+    let mut h = History::default();
+    for k in 0..=10 {
+        let t = k as f64 * 0.1;
+        h.record(
+            t,
+            &[AgentState::moving(
+                7,
+                Vec2::new(0.0, 0.0),
+                0.0,
+                5.0 + 2.0 * t,
+            )],
+        );
+    }
+    let mut car = AgentState::moving(7, Vec2::new(0.0, 0.0), 0.0, 7.0);
+    assert_eq!(current_accel(&car, h.track(7), 1.0), 0.0);
+    car.acc = Vec2::new(1.5, 0.0);
+    assert_eq!(current_accel(&car, h.track(7), 1.0), 1.5);
+    let braking = Forecast {
+        accel: -5.0,
+        ..Forecast::default()
+    };
+    assert!((braking.stop_distance(5.0) - 2.5).abs() < 1e-12);
+    assert!(Forecast::default().stop_distance(5.0).is_infinite());
+    assert_eq!(braking.stop_distance(0.0), 0.0);
+    let yielding = Forecast {
+        stop_in_m: 3.0,
+        ..braking
+    };
+    assert_eq!(yielding.stop_distance(5.0), 3.0);
+}
+
+#[test]
+fn decelerating_behind_a_leader_that_brakes_to_a_stop_stops_behind_it() {
+    let (mut core, mut scene, leader_stop) = behind_a_leader_braking_unreported();
+    let p = Params::default();
+    let t = &p.trajectory;
+    let d = core.step(&scene, 1.0, None).unwrap();
+    let start = d.trajectory.points()[0].s;
+    // "decelerate" stops the car length and the stop margin behind where the leader stops.
+    let stop = core.choice().profiles[Maneuver::Decelerate.index()].stop_m;
+    let expected = leader_stop - t.vehicle_length_m - t.stop_margin_m - start;
+    assert!((stop - expected).abs() < 0.2, "{stop} vs {expected}");
+    assert_eq!(d.source, concord_core::DecisionSource::Logit, "{d:?}");
+    assert_eq!(d.maneuver, Maneuver::Decelerate);
+    // The plan stays behind it, and can still stop behind it at the horizon.
+    let end = d.trajectory.points().last().unwrap();
+    let stops_at = end.s + end.speed * end.speed / (2.0 * p.choice.decelerate_mps2);
+    assert!(
+        stops_at <= leader_stop - t.vehicle_length_m,
+        "{end:?}, {leader_stop}"
+    );
+    // Far behind the same leader, the ego has time to slow: no stop is planned yet.
+    let (ego, h, _) = core
+        .morphology()
+        .lane(paper::CAV_LEFT)
+        .pose_at(start - 40.0, 0);
+    scene.ego = AgentState::moving(0, ego, h, 8.0);
+    core.step(&scene, 1.0, None).unwrap();
+    assert!(core.choice().profiles[Maneuver::Decelerate.index()]
+        .stop_m
+        .is_infinite());
 }
