@@ -1687,8 +1687,8 @@ pub enum Reject {
 #[cfg(test)]
 mod tests {
     use super::{
-        curved_reach, Footprint, FrenetState, Hit, LaneFrame, Occupancy, Planner, MAX_BOXES,
-        VCAP_BINS,
+        curved_reach, rectangles_overlap, Footprint, FrenetState, Hit, LaneFrame, Occupancy,
+        Planner, MAX_BOXES, VCAP_BINS,
     };
     use crate::choice::Profile;
     use crate::params::Params;
@@ -2007,5 +2007,103 @@ mod tests {
             occ.add(0, 1.0, 9.0, -1.0, 1.0, None);
             assert_eq!(occ.boxes(0).count(), 2, "{l_lo}..{l_hi}");
         }
+    }
+
+    #[test]
+    fn a_curve_box_holds_every_ego_centre_that_touches_the_other_and_little_more() {
+        // A lane that is a circle of radius ρ about O, bending to `side`; the other's
+        // rectangle (half extents `tangential`, `radial`) aligned with the lane at its foot
+        // point (s, l), the ego at most half the circle away. Every ego centre within ±l_ego of the lane whose rectangle, aligned
+        // with the lane, meets the other's lies in the box (sound), and the box reaches no
+        // more than 2 m beyond the furthest of them on any side for radii of 10 m or more,
+        // 12 m on sharper bends (tight: a looser box costs only narrow-phase tests, but it is
+        // the broad phase of every step).
+        let (hl, hw, l_ego) = (2.4, 0.9, 3.0);
+        let pose = |rho: f64, side: f64, s: f64, l: f64| {
+            let phi = side * s / rho;
+            let r = rho - side * l;
+            let heading = phi + side * core::f64::consts::FRAC_PI_2;
+            (
+                Vec2::new(r * phi.cos(), r * phi.sin()),
+                (heading.cos(), heading.sin()),
+            )
+        };
+        let mut worst: f64 = 0.0;
+        for rho in [4.5, 6.0, 10.0, 20.0, 40.0] {
+            for side in [-1.0, 1.0] {
+                for l in [-2.5, -1.0, 0.0, 1.5, 3.0] {
+                    for (tangential, radial) in [(2.9, 1.4), (1.4, 2.9), (4.0, 3.0)] {
+                        let s = 30.0;
+                        let reach = curved_reach(
+                            (s, l),
+                            (hl, hw),
+                            tangential,
+                            radial,
+                            1.0 / rho,
+                            side,
+                            l_ego,
+                        );
+                        let (oc, oh) = pose(rho, side, s, l);
+                        let mut seen =
+                            [f64::INFINITY, -f64::INFINITY, f64::INFINITY, -f64::INFINITY];
+                        for i in -400..=400 {
+                            let se = s + 0.05 * i as f64;
+                            // A turn is less than half a circle: no wrapping round.
+                            if (se - s).abs() >= core::f64::consts::PI * rho {
+                                continue;
+                            }
+                            for j in -30..=30 {
+                                let le = 0.1 * j as f64;
+                                let (ec, eh) = pose(rho, side, se, le);
+                                if !rectangles_overlap(
+                                    ec,
+                                    eh,
+                                    (hl, hw),
+                                    oc,
+                                    oh,
+                                    (tangential, radial),
+                                ) {
+                                    continue;
+                                }
+
+                                let [s_lo, s_hi, l_lo, l_hi] = reach.unwrap_or_else(|| {
+                                    panic!("ρ {rho}, side {side}, l {l}: ({se}, {le}) touches")
+                                });
+                                assert!(
+                                    se >= s_lo && se <= s_hi && le >= l_lo && le <= l_hi,
+                                    "ρ {rho}, side {side}, l {l}, {tangential}×{radial}: ({se}, {le}) touches, outside {reach:?}"
+                                );
+                                seen = [
+                                    seen[0].min(se),
+                                    seen[1].max(se),
+                                    seen[2].min(le),
+                                    seen[3].max(le),
+                                ];
+                            }
+                        }
+                        if let (Some(b), true) = (reach, seen[0].is_finite()) {
+                            // Across, what lies beyond ±l_ego is not the ego's (the planner drops it).
+                            let excess = [
+                                seen[0] - b[0],
+                                b[1] - seen[1],
+                                seen[2] - b[2].max(-l_ego),
+                                b[3].min(l_ego) - seen[3],
+                            ];
+                            for e in excess {
+                                worst = worst.max(e);
+                            }
+                            assert!(
+                                excess.iter().all(|&e| e <= if rho < 10.0 { 12.0 } else { 2.0 }),
+                                "ρ {rho}, side {side}, l {l}, {tangential}×{radial}: box {b:?} against touching {seen:?}: {excess:?}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            worst > 0.25 && worst < 12.0,
+            "the box keeps its slack ({worst})"
+        );
     }
 }
