@@ -314,3 +314,32 @@ fn a_car_across_a_straight_lane_blocks_exactly_the_minkowski_box_of_the_two_rect
         }
     }
 }
+
+#[test]
+fn every_evaluated_candidate_is_counted_under_one_verdict() {
+    // From 5 m/s, reaching 20 m/s within about a second breaks the acceleration limit: every
+    // candidate is a limit reject, and the counts add up to the candidates evaluated.
+    let p = Params::default().trajectory;
+    let (mut planner, _) = planner_on_the_turn(5.0, 5.0, &p);
+    let sprint = Profile {
+        accel: 15.0,
+        target_speed: 20.0,
+        duration: 1.0,
+        stop_m: f64::INFINITY,
+    };
+    planner.sample(&sprint, 32, 1, &p);
+    let mut stats = PlanStats::default();
+    assert!(planner.run(32, &p, &mut stats).is_none());
+    assert_eq!(stats.evaluated, 32);
+    assert!(stats.limit_rejects > 24, "{stats:?}");
+    assert_eq!(
+        stats.feasible
+            + stats.limit_rejects
+            + stats.collision_rejects
+            + stats.zone_rejects
+            + stats.score_rejects,
+        stats.evaluated,
+        "{stats:?}"
+    );
+    assert_eq!(stats.best_score, f64::INFINITY);
+}

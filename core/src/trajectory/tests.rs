@@ -2,7 +2,7 @@
 
 use super::{
     curved_reach, rectangles_overlap, roots_in, Footprint, FrenetState, Hit, LaneFrame, Occupancy,
-    Planner, MAX_BOXES, VCAP_BINS,
+    PassageMargin, Planner, Reject, MAX_BOXES, VCAP_BINS,
 };
 use crate::choice::Profile;
 use crate::params::Params;
@@ -571,4 +571,312 @@ fn below_the_low_speed_only_sample_one_of_a_creep_stops_at_the_yield_point() {
     for k in (0..16).filter(|&k| k != 1) {
         assert!(planner.end_v[k] > 0.5, "sample {k}: {}", planner.end_v[k]);
     }
+}
+
+#[test]
+fn rolling_samples_end_below_the_start_speed_and_take_the_time_their_mean_speed_needs() {
+    // A yielding stop from 8 m/s over 6 s: odd samples reach the yield point at
+    // v_T ∈ [0, v₀] and take T' = T·v₀ / (v₀ + v_T) before their ±45 % perturbation.
+    let p = Params::default().trajectory;
+    let mut planner = Planner {
+        start: FrenetState {
+            ds: 8.0,
+            ..FrenetState::default()
+        },
+        ..Planner::default()
+    };
+    let stop = Profile {
+        accel: -1.33,
+        target_speed: 0.0,
+        duration: 6.0,
+        stop_m: 24.0,
+    };
+    planner.sample(&stop, 64, 5, &p);
+    let spread = p.sigma_rel * p.sigma_clip;
+    for k in (1..64).step_by(2) {
+        let (t, v) = (planner.end_t[k], planner.end_v[k]);
+        assert!((0.0..=8.0).contains(&v), "sample {k}: v_T {v}");
+        let ratio = t / (6.0 * 8.0 / (8.0 + v));
+        assert!(ratio >= 1.0 - spread - 1e-9, "sample {k}: T {t}, v_T {v}");
+        assert!(
+            t == p.max_duration_s || ratio <= 1.0 + spread + 1e-9,
+            "sample {k}: T {t}, v_T {v}"
+        );
+    }
+}
+
+#[test]
+fn slowing_from_a_braking_start_is_no_longer_than_its_speed_stays_monotone() {
+    // Braking at 2 m/s² from 8 m/s towards 6 m/s over 5 s: a quartic's speed stays between
+    // its ends only for T ≤ 3 (v₀ − v_T) / |a₀| (≈ 3 s here), so each sample slowing down is cut
+    // there (but not below the shortest duration), and otherwise keeps its perturbed duration.
+    let p = Params::default().trajectory;
+    let mut planner = Planner {
+        start: FrenetState {
+            ds: 8.0,
+            dds: -2.0,
+            ..FrenetState::default()
+        },
+        ..Planner::default()
+    };
+    let slow = Profile {
+        accel: -0.4,
+        target_speed: 6.0,
+        duration: 5.0,
+        stop_m: f64::INFINITY,
+    };
+    planner.sample(&slow, 64, 9, &p);
+    let spread = p.sigma_rel * p.sigma_clip;
+    let mut cut = 0;
+    for k in 0..64 {
+        let (t, v) = (planner.end_t[k], planner.end_v[k]);
+        if v >= 8.0 {
+            continue;
+        }
+        let monotone = (3.0 * (8.0 - v) / 2.0).max(p.min_duration_s);
+        assert!(t <= monotone + 1e-9, "sample {k}: T {t}, v_T {v}");
+        assert!(
+            t >= monotone.min(5.0 * (1.0 - spread)) - 1e-9,
+            "sample {k}: T {t}, v_T {v}"
+        );
+        cut += usize::from(t == monotone);
+    }
+    assert!(cut > 10, "{cut} samples cut");
+}
+
+/// A planner on an empty road (no occupancy, no curve caps) from `start`, 50 steps of 0.1 s,
+/// keeping one post-encroachment margin: out of [s₀, s₁] m during [t₀, t₁] s.
+fn keeping(start: FrenetState, s: [f64; 2], t: [f64; 2]) -> Planner {
+    let mut planner = Planner {
+        start,
+        steps: 50,
+        dt: 0.1,
+        vcap_min: f64::INFINITY,
+        ..Planner::default()
+    };
+    planner.margins[0] = PassageMargin { s, t };
+    planner.n_margins = 1;
+    planner
+}
+
+/// When the candidate of `planner` to (`t_end`, `v_end`) first reaches `x` m, interpolated
+/// linearly between the 0.1 s steps (past `t_end` at `v_end`), s.
+fn reaches(planner: &Planner, t_end: f64, v_end: f64, x: f64) -> f64 {
+    let p = Params::default().trajectory;
+    let (q, _) = planner.polynomials(t_end, v_end, 0.0, &p);
+    let (mut t0, mut s0) = (0.0, planner.start.s);
+    for k in 1..=50 {
+        let t = 0.1 * k as f64;
+        let s = if t <= t_end {
+            q.pos(t)
+        } else {
+            q.pos(t_end) + v_end * (t - t_end)
+        };
+        if s >= x {
+            return t0 + (x - s0) / (s - s0) * (t - t0);
+        }
+        (t0, s0) = (t, s);
+    }
+    f64::INFINITY
+}
+
+#[test]
+fn a_margin_refuses_exactly_the_candidates_in_the_passage_while_it_holds() {
+    // Cruising at 8 m/s from s = 0, the ego is in the passage [20.4, 30.4] m from 2.55 s to
+    // 3.8 s (between steps: interpolated). A margin holding until just before it enters, or
+    // from just after it has left, lets it pass; one overlapping its stay by 0.01 s refuses
+    // it, at the moment the two overlap first. Slowing from 10 to 4 m/s, the same holds at
+    // the moments its own polynomial reaches the passage's ends.
+    let p = Params::default().trajectory;
+    let cruise = FrenetState {
+        ds: 8.0,
+        ..FrenetState::default()
+    };
+    let s = [20.4, 30.4];
+    let verdict = |start: FrenetState, t: [f64; 2], t_end: f64, v_end: f64| {
+        keeping(start, s, t).evaluate(t_end, v_end, 0.0, &p).err()
+    };
+    assert_eq!(verdict(cruise, [0.0, 2.54], 3.0, 8.0), None);
+    assert_eq!(verdict(cruise, [3.81, 9.0], 3.0, 8.0), None);
+    let Some(Reject::Collision(t)) = verdict(cruise, [0.0, 2.56], 3.0, 8.0) else {
+        panic!("entering inside the margin");
+    };
+    assert!((t - 2.55).abs() < 1e-9, "{t}");
+    let Some(Reject::Collision(t)) = verdict(cruise, [3.79, 9.0], 3.0, 8.0) else {
+        panic!("leaving inside the margin");
+    };
+    assert!((t - 3.79).abs() < 1e-9, "{t}");
+    let slowing = FrenetState {
+        ds: 10.0,
+        dds: -1.0,
+        ..FrenetState::default()
+    };
+    let probe = keeping(slowing, s, [0.0, 0.0]);
+    let (enter, leave) = (
+        reaches(&probe, 4.0, 4.0, s[0]),
+        reaches(&probe, 4.0, 4.0, s[1]),
+    );
+    assert!(
+        enter > 1.0 && leave < 5.0 && enter < leave,
+        "{enter}, {leave}"
+    );
+    assert_eq!(verdict(slowing, [0.0, enter - 0.01], 4.0, 4.0), None);
+    assert_eq!(verdict(slowing, [leave + 0.01, 9.0], 4.0, 4.0), None);
+    let Some(Reject::Collision(t)) = verdict(slowing, [0.0, enter + 0.01], 4.0, 4.0) else {
+        panic!("slowing, entering inside the margin");
+    };
+    assert!((t - enter).abs() < 1e-9, "{t} vs {enter}");
+    assert!(matches!(
+        verdict(slowing, [leave - 0.01, 9.0], 4.0, 4.0),
+        Some(Reject::Collision(_))
+    ));
+    // Speeding up from 4 to 12 m/s: the moment it leaves stays the one interpolated on the
+    // step it crosses the passage's end.
+    let speeding = FrenetState {
+        ds: 4.0,
+        ..FrenetState::default()
+    };
+    let probe = keeping(speeding, s, [0.0, 0.0]);
+    let leave = reaches(&probe, 4.0, 12.0, s[1]);
+    assert!(leave < 4.5, "{leave}");
+    assert_eq!(verdict(speeding, [leave + 0.01, 9.0], 4.0, 12.0), None);
+    // Starting inside the passage, the ego is in it from now; past it, or stopping short of
+    // it, it keeps any margin.
+    let past = FrenetState { s: 35.0, ..cruise };
+    assert_eq!(
+        verdict(past, [0.0, 9.0], 3.0, 8.0),
+        None,
+        "past the passage"
+    );
+    let inside = FrenetState { s: 25.0, ..cruise };
+    let Some(Reject::Collision(t)) = verdict(inside, [0.2, 9.0], 3.0, 8.0) else {
+        panic!("inside the passage from the start");
+    };
+    assert!((t - 0.2).abs() < 1e-9, "{t}");
+    let short = FrenetState {
+        s: 5.0,
+        ds: 4.0,
+        ..FrenetState::default()
+    };
+    assert_eq!(verdict(short, [0.0, 9.0], 3.0, 0.0), None, "stops short");
+}
+
+#[test]
+fn a_held_offset_ignores_the_lateral_start_motion_only_at_low_speed_with_no_offset_change() {
+    // At 1 m/s (under 2 m/s), holding the start's 0.3 m offset: the lateral polynomial is
+    // the constant 0.3 (a time-based lateral motion would need unbounded curvature), also
+    // with a lateral speed and acceleration at the start; so it is when only the end is
+    // slow. Both fast, or a new offset: the quintic of eq. 21–22 from the start's state.
+    let p = Params::default().trajectory;
+    let planner = |ds: f64| Planner {
+        start: FrenetState {
+            ds,
+            l: 0.3,
+            dl: 0.2,
+            ddl: 0.1,
+            ..FrenetState::default()
+        },
+        ..Planner::default()
+    };
+    let held = [0.3, 0.0, 0.0, 0.0, 0.0, 0.0];
+    assert_eq!(planner(1.0).polynomials(3.0, 3.0, 0.3, &p).1.c, held);
+    assert_eq!(planner(3.0).polynomials(3.0, 1.0, 0.3, &p).1.c, held);
+    for (ds, v_end, l_end) in [(3.0, 3.0, 0.3), (1.0, 1.0, 0.5)] {
+        let l = planner(ds).polynomials(3.0, v_end, l_end, &p).1;
+        assert_eq!(
+            (l.c[0], l.c[1], l.c[2]),
+            (0.3, 0.2, 0.05),
+            "{ds}, {v_end}, {l_end}"
+        );
+        assert!((l.pos(3.0) - l_end).abs() < 1e-9);
+    }
+}
+
+#[test]
+fn a_lateral_path_beyond_its_bound_is_refused_between_the_ends() {
+    // Drifting out at 1 m/s from 0.9 m, with lateral acceleration, towards the 1 m offset
+    // over 6 s: the quintic overshoots to about 2 m mid-way, beyond the bound (the largest
+    // offset plus the overshoot of the quickest correction), though both ends are within it.
+    let p = Params::default().trajectory;
+    let planner = Planner {
+        start: FrenetState {
+            ds: 5.0,
+            l: 0.9,
+            dl: 1.0,
+            ddl: 0.1,
+            ..FrenetState::default()
+        },
+        steps: 50,
+        dt: 0.1,
+        vcap_min: f64::INFINITY,
+        ..Planner::default()
+    };
+    let (_, l) = planner.polynomials(6.0, 5.0, 1.0, &p);
+    let bound = planner.lateral_bound(&p);
+    assert!(l.c.iter().all(|c| *c != 0.0), "{:?}", l.c);
+    assert!((0..=50).any(|k| l.pos(0.1 * k as f64) > bound), "{bound}");
+    assert_eq!(
+        planner.evaluate(6.0, 5.0, 1.0, &p).err(),
+        Some(Reject::Limits)
+    );
+}
+
+#[test]
+fn a_yielding_candidate_short_of_the_check_time_is_judged_at_its_end_speed() {
+    // Easing from 8 to 7 m/s over 1 s, then rolling on at 7 m/s: at the yield check time it
+    // is at s(1) + 7 (t_check − 1) m and stops within 7² / (2 · b / 1.5) m more. It commits
+    // when that is past the yield point, however little (1e-6 m tolerance), and not when it
+    // is short of it. (Checked at 2 s here.)
+    let mut p = Params::default().trajectory;
+    p.yield_check_s = 2.0;
+    let start = FrenetState {
+        ds: 8.0,
+        ..FrenetState::default()
+    };
+    let q = super::Quartic::fit(0.0, 8.0, 0.0, 7.0, 0.0, 1.0);
+    let t_check = p.yield_check_s.min(5.0);
+    assert!(t_check > 1.0);
+    let stops_at = q.pos(1.0) + 7.0 * (t_check - 1.0) + 49.0 / (2.0 * p.max_brake_mps2 / 1.5);
+    let planner = |yield_distance: f64| Planner {
+        start,
+        steps: 50,
+        dt: 0.1,
+        vcap_min: f64::INFINITY,
+        yielding: true,
+        yield_distance,
+        clear_distance: 100.0,
+        ..Planner::default()
+    };
+    assert!(planner(stops_at + 0.01).evaluate(1.0, 7.0, 0.0, &p).is_ok());
+    assert_eq!(
+        planner(stops_at - 0.01).evaluate(1.0, 7.0, 0.0, &p).err(),
+        Some(Reject::Commits)
+    );
+}
+
+#[test]
+fn a_stop_longer_than_the_horizon_still_counts_as_standing_where_it_ends() {
+    // A 6 s stop from 6 m/s, longer than the 5 s horizon, still rolls at its end; it ends
+    // standing about 18 m on, inside the zone [10, 25] m: refused. Ending short of the zone,
+    // it is not.
+    let p = Params::default().trajectory;
+    let mut planner = Planner {
+        start: FrenetState {
+            ds: 6.0,
+            ..FrenetState::default()
+        },
+        steps: 50,
+        dt: 0.1,
+        vcap_min: f64::INFINITY,
+        ..Planner::default()
+    };
+    let (q, _) = planner.polynomials(6.0, 0.0, 0.0, &p);
+    assert!(q.vel(5.0) > 0.3 && (10.0..25.0).contains(&q.pos(6.0)));
+    planner.keep_zones([[10.0, 25.0]].into_iter());
+    assert_eq!(
+        planner.evaluate(6.0, 0.0, 0.0, &p).err(),
+        Some(Reject::StandsInZone)
+    );
+    planner.keep_zones([[20.0, 25.0]].into_iter());
+    assert!(planner.evaluate(6.0, 0.0, 0.0, &p).is_ok());
 }
