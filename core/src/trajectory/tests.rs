@@ -813,6 +813,12 @@ fn a_lateral_path_beyond_its_bound_is_refused_between_the_ends() {
     };
     let (_, l) = planner.polynomials(6.0, 5.0, 1.0, &p);
     let bound = planner.lateral_bound(&p);
+    // 0.9 m plus 16/81 · u · T for u = 1 m/s and the quickest correction T = 6√(u/J), 1e-6 m
+    // tolerance.
+    let quickest = 6.0 * libm::sqrt(1.0 / p.max_jerk_mps3);
+    assert!(quickest > p.min_duration_s);
+    let want = (0.9 + 16.0 / 81.0 * quickest).max(p.max_lateral_offset_m) + 1e-6;
+    assert!((bound - want).abs() < 1e-12, "{bound} vs {want}");
     assert!(l.c.iter().all(|c| *c != 0.0), "{:?}", l.c);
     assert!((0..=50).any(|k| l.pos(0.1 * k as f64) > bound), "{bound}");
     assert_eq!(
@@ -879,4 +885,108 @@ fn a_stop_longer_than_the_horizon_still_counts_as_standing_where_it_ends() {
     );
     planner.keep_zones([[20.0, 25.0]].into_iter());
     assert!(planner.evaluate(6.0, 0.0, 0.0, &p).is_ok());
+}
+
+#[test]
+fn a_candidates_score_is_table_2s_sum_with_the_lateral_term_and_a_capped_time_to_goal() {
+    // S_k = c_e·T_n/T_ref + c_s·(∫|s⃛| + ∫|l⃛|)/J_max + c_l·|l_T|/l_max, the jerk integrals
+    // being the total variations of the accelerations (summed here over a fine grid), T_n
+    // the interpolated time to the goal, and, for a goal beyond the horizon, the horizon
+    // plus the rest at the final speed (at least 0.5 m/s), at most 10·T_ref.
+    let mut p = Params::default().trajectory;
+    p.max_lateral_offset_m = 2.0;
+    let variation = |f: &dyn Fn(f64) -> f64, t_end: f64| {
+        (0..10_000)
+            .map(|i| {
+                let (a, b) = (t_end * i as f64 / 1e4, t_end * (i + 1) as f64 / 1e4);
+                (f(b) - f(a)).abs()
+            })
+            .sum::<f64>()
+    };
+    let planner = |ds: f64, goal_distance: f64| Planner {
+        start: FrenetState {
+            ds,
+            ..FrenetState::default()
+        },
+        steps: 50,
+        dt: 0.1,
+        vcap_min: f64::INFINITY,
+        goal_distance,
+        ..Planner::default()
+    };
+    // Cruising at 8 m/s to 0.5 m off the lane over 3 s: the goal 20 m ahead at 2.5 s.
+    let cruise = planner(8.0, 20.0);
+    let c = cruise.evaluate(3.0, 8.0, 0.5, &p).expect("feasible");
+    let jerk = variation(&|t| c.l.acc(t), 3.0);
+    let want = p.c_efficiency * 2.5 / p.t_ref_s
+        + p.c_smoothness * jerk / p.j_max_norm
+        + p.c_lateral * 0.5 / p.max_lateral_offset_m;
+    assert!((c.score - want).abs() < 1e-6, "{} vs {want}", c.score);
+    // Stopping from 4 m/s over 3 s with the goal 1000 m away: T_n is capped.
+    let stop = planner(4.0, 1000.0);
+    let c = stop.evaluate(3.0, 0.0, 0.0, &p).expect("feasible");
+    let jerk = variation(&|t| c.s.acc(t), 3.0);
+    let want = p.c_efficiency * 10.0 + p.c_smoothness * jerk / p.j_max_norm;
+    assert!((c.score - want).abs() < 1e-6, "{} vs {want}", c.score);
+}
+
+#[test]
+fn each_longitudinal_limit_holds_at_its_value_and_refuses_past_it_at_the_extremum() {
+    // Table 2's limits on the quartic (eq. 17): extremes of jerk at the ends, of acceleration
+    // at the ends and the vertex, of speed at the ends and the roots of the acceleration;
+    // a start already beyond the braking limit may keep braking as hard; each limit has a
+    // 1e-6 tolerance. The jerk integral is the total variation of the acceleration.
+    let p = Params::default().trajectory;
+    let limits = |ds: f64, dds: f64, t_end: f64, v_end: f64| {
+        let planner = Planner {
+            start: FrenetState {
+                ds,
+                dds,
+                ..FrenetState::default()
+            },
+            ..Planner::default()
+        };
+        let (q, l) = planner.polynomials(t_end, v_end, 0.0, &p);
+        (planner.check_limits(&q, &l, t_end, &p), q)
+    };
+    // Braking at 10 m/s² (beyond the 5 m/s² limit) eased to 0 over 1 s: jerk exactly 10.
+    assert!(limits(10.0, -10.0, 1.0, 5.0).0.is_ok());
+    // A 6 m/s² braking start eased out linearly (6 m/s³) is within its own braking.
+    assert!(limits(10.0, -6.0, 1.0, 7.0).0.is_ok());
+    // Stopping from 10 m/s over 2.5 s peaks at 1.5 · 4 = 6 m/s² (jerk 9.6): too hard.
+    assert_eq!(limits(10.0, 0.0, 2.5, 0.0).0.err(), Some(Reject::Limits));
+    assert!(limits(10.0, 0.0, 3.5, 0.0).0.is_ok());
+    // Speeding up by 10 m/s over 2.5 s peaks at 6 m/s² too.
+    assert!(p.max_accel_mps2 < 6.0);
+    assert_eq!(limits(5.0, 0.0, 2.5, 15.0).0.err(), Some(Reject::Limits));
+    // From a 4 m/s² braking start at 2 m/s, a 3 s stop undershoots below zero mid-way;
+    // from 2 m/s² at 19.5 m/s, holding 19.5 over 4 s overshoots the 20 m/s top speed.
+    let (verdict, q) = limits(2.0, -4.0, 3.0, 0.0);
+    assert!((0..30).any(|k| q.vel(0.1 * k as f64) < -1e-3));
+    assert_eq!(verdict.err(), Some(Reject::Limits));
+    let (verdict, q) = limits(19.5, 2.0, 4.0, 19.5);
+    assert!((0..40).any(|k| q.vel(0.1 * k as f64) > 20.0 + 1e-3));
+    assert_eq!(verdict.err(), Some(Reject::Limits));
+    // The jerk integral and the peak speed of a gentle speed-up from an accelerating start,
+    // whose acceleration peaks inside: against a fine grid.
+    let (verdict, q) = limits(8.0, 1.0, 4.0, 12.0);
+    let (jerk_s, jerk_l, v_peak) = verdict.expect("within the limits");
+    let tv: f64 = (0..10_000)
+        .map(|i| (q.acc(4.0 * (i + 1) as f64 / 1e4) - q.acc(4.0 * i as f64 / 1e4)).abs())
+        .sum();
+    let peak = (0..=10_000)
+        .map(|i| q.vel(4.0 * i as f64 / 1e4))
+        .fold(0.0, f64::max);
+    let a_peak = (0..=10_000)
+        .map(|i| q.acc(4.0 * i as f64 / 1e4))
+        .fold(0.0, f64::max);
+    assert!(
+        a_peak > 1.0 + 1e-3,
+        "the acceleration peaks inside: {a_peak}"
+    );
+    assert!((jerk_s - tv).abs() < 1e-6, "{jerk_s} vs {tv}");
+    assert!(
+        (v_peak - peak).abs() < 1e-6 && jerk_l == 0.0,
+        "{v_peak} vs {peak}"
+    );
 }
