@@ -481,6 +481,9 @@ fn a_curve_box_on_a_straight_a_double_bend_or_a_sharp_turn_is_its_documented_box
     }
 }
 
+/// A box as (s_lo, s_hi, l_lo, l_hi), m.
+type Box4 = (f64, f64, f64, f64);
+
 #[test]
 fn a_box_beyond_the_last_slot_merges_where_the_area_grows_least() {
     // Random boxes in every slot and one more: exactly one box changes, it becomes the union
@@ -489,7 +492,7 @@ fn a_box_beyond_the_last_slot_merges_where_the_area_grows_least() {
     use rand::Rng;
     for _ in 0..200 {
         let mut occ = Occupancy::default();
-        let mut draw = |rng: &mut rand::rngs::SmallRng| {
+        let draw = |rng: &mut rand::rngs::SmallRng| {
             let (s, l): (f64, f64) = (rng.random_range(0.0..100.0), rng.random_range(-5.0..5.0));
             let (ds, dl): (f64, f64) = (rng.random_range(0.5..8.0), rng.random_range(0.5..4.0));
             (s, s + ds, l, l + dl)
@@ -519,7 +522,7 @@ fn a_box_beyond_the_last_slot_merges_where_the_area_grows_least() {
             .iter()
             .map(|&b| growth(b))
             .fold(f64::INFINITY, f64::min);
-        let differs = |(now, was): (&(f64, f64, f64, f64), &(f64, f64, f64, f64))| now != was;
+        let differs = |(now, was): (&Box4, &Box4)| now != was;
         let now: [(f64, f64, f64, f64); MAX_BOXES] =
             core::array::from_fn(|k| occ.boxes(0).nth(k).expect("every slot"));
         if least == 0.0 {
