@@ -1803,67 +1803,107 @@ fn rectangles_meet(a: Vec2, ha: f64, ea: (f64, f64), b: Vec2, hb: f64, eb: (f64,
 fn a_standing_car_blocks_exactly_where_the_egos_rectangle_would_meet_its_own() {
     // A standing car before, in and after the paper's left turn (a 10 m arc) and right turn
     // (5 m), on the centre line and up to 7 m to either side, at five headings to the lane:
-    // at every point of a 0.2 m grid around it, the ego's reference point is in contact where
-    // the ego's rectangle there meets the car's with its clearance and first-step growth (by
-    // more than 6 cm), and free where they stay more than 6 cm apart, whether the core tests
-    // the car's box alone (where the box is exact) or its rectangle (where the lane bends, a
-    // box in the lane's frame is not the Minkowski sum, and the rectangles' reach is). 6 cm:
-    // the planner's tabulated frame places the ego up to 5 cm from the lane's own conversion
-    // 3 m inside the 5 m arc. The ego may plan up to 3 m off its lane here.
+    // see `assert_contacts_exact`. The ego may plan up to 3 m off its lane here.
     let p = TrajectoryParams {
         max_lateral_offset_m: 3.0,
         ..Params::default().trajectory
     };
     let morph = BuiltIn::PaperIntersection.morphology();
-    let (hl, hw) = (0.5 * p.vehicle_length_m, 0.5 * p.vehicle_width_m);
-    let clear = p.safety_margin_m;
-    let other = (hl + p.margin_growth_mps * p.dt_s + clear, hw + clear);
-    let grow = |d: f64| (other.0 + d, other.1 + d);
     let mut checked = [0usize; 2];
     // Each lane with arc lengths before, in and after its turn.
     for (id, cars) in [
         (paper::CAV_LEFT, [30.0, 38.0, 43.0, 48.0, 53.0]),
         (paper::WEST_RIGHT, [32.0, 36.0, 39.0, 42.0, 45.0]),
     ] {
-        let lane = morph.lane(id);
-        let start = FrenetState {
-            s: 20.0,
-            ..FrenetState::default()
-        };
         for s_car in cars {
             for l_car in [-7.0, -4.5, -2.0, 0.0, 2.0, 4.5, 7.0] {
                 for turn in [0.0, 0.3, 0.79, 1.2, 1.57] {
-                    let (pos, tangent, _) = lane.to_cartesian(s_car, l_car, 0);
-                    let h_car = tangent + turn;
-                    let car = AgentState::moving(1, pos, h_car, 0.0);
-                    let mut planner = Planner::default();
-                    let none = [ProcessState::default(); MAX_AGENTS];
-                    let straight_on = [Forecast::default(); MAX_AGENTS];
-                    planner.prepare(id, start, 100.0, &[car], &none, &straight_on, &morph, &p);
-                    for i in 0..=80 {
-                        for j in 0..=30 {
-                            let (s, l) = (s_car - 8.0 + 0.2 * i as f64, -3.0 + 0.2 * j as f64);
-                            let (ego, h, _) = lane.to_cartesian(s, l, 0);
-                            let meets = rectangles_meet(ego, h, (hl, hw), pos, h_car, grow(-0.06));
-                            let near = rectangles_meet(ego, h, (hl, hw), pos, h_car, grow(0.06));
-                            let hit = planner.occupancy.hit(0, s, l);
-                            let at = || {
-                                format!("lane {id}: car at ({s_car}, {l_car}) turned {turn}, ego at ({s:.1}, {l:.1})")
-                            };
-                            if meets {
-                                assert_eq!(hit, Hit::Contact, "{}", at());
-                                checked[0] += 1;
-                            } else if !near {
-                                assert_ne!(hit, Hit::Contact, "{}", at());
-                                checked[1] += 1;
-                            }
-                        }
-                    }
+                    assert_contacts_exact(&morph, id, 20.0, (s_car, l_car, turn), &p, &mut checked);
                 }
             }
         }
     }
     assert!(checked[0] > 10_000 && checked[1] > 10_000, "{checked:?}");
+}
+
+#[test]
+fn far_along_a_lane_a_standing_car_on_its_bend_blocks_exactly_where_the_rectangles_meet() {
+    // The same check 1 km along a lane, where its 10 m bend begins: the planner's frame
+    // spans the window the ego can reach from there, not the lane from its start.
+    let p = TrajectoryParams {
+        max_lateral_offset_m: 3.0,
+        ..Params::default().trajectory
+    };
+    let mut points = vec![Vec2::new(0.0, 0.0)];
+    points.extend((0..=18).map(|k| {
+        let a = k as f64 * std::f64::consts::FRAC_PI_2 / 18.0;
+        Vec2::new(1000.0 + 10.0 * a.sin(), 10.0 - 10.0 * a.cos())
+    }));
+    points.push(Vec2::new(1010.0, 60.0));
+    let bend = concord_core::scene::Lane::new(&points, 1.75, 15.0, Turn::Left).expect("a lane");
+    let morph = Morphology::new(&[bend]).expect("a map");
+    let mut checked = [0usize; 2];
+    for s_car in [1003.0, 1008.0, 1014.0] {
+        for l_car in [-2.0, 0.0, 2.0] {
+            for turn in [0.0, 0.79] {
+                assert_contacts_exact(&morph, 0, 995.0, (s_car, l_car, turn), &p, &mut checked);
+            }
+        }
+    }
+    assert!(checked[0] > 1_000 && checked[1] > 1_000, "{checked:?}");
+}
+
+/// For a car standing at (s, l) of `lane`, turned `turn` rad from it, and the ego at `s_ego`:
+/// at every point of a 0.2 m grid around the car, the ego's reference point is in contact
+/// where the ego's rectangle there meets the car's with its clearance and first-step growth
+/// (by more than 6 cm), and free where they stay more than 6 cm apart, whether the core tests
+/// the car's box alone (where the box is exact) or its rectangle (where the lane bends, a box
+/// in the lane's frame is not the Minkowski sum, and the rectangles' reach is). 6 cm: the
+/// planner's tabulated frame places the ego up to 5 cm from the lane's own conversion 3 m
+/// inside a 5 m arc. Counts the points checked in contact and free in `checked`.
+fn assert_contacts_exact(
+    morph: &Morphology,
+    lane_id: u8,
+    s_ego: f64,
+    (s_car, l_car, turn): (f64, f64, f64),
+    p: &TrajectoryParams,
+    checked: &mut [usize; 2],
+) {
+    let lane = morph.lane(lane_id);
+    let (hl, hw) = (0.5 * p.vehicle_length_m, 0.5 * p.vehicle_width_m);
+    let clear = p.safety_margin_m;
+    let other = (hl + p.margin_growth_mps * p.dt_s + clear, hw + clear);
+    let grow = |d: f64| (other.0 + d, other.1 + d);
+    let start = FrenetState {
+        s: s_ego,
+        ..FrenetState::default()
+    };
+    let (pos, tangent, _) = lane.to_cartesian(s_car, l_car, 0);
+    let h_car = tangent + turn;
+    let car = AgentState::moving(1, pos, h_car, 0.0);
+    let mut planner = Planner::default();
+    let none = [ProcessState::default(); MAX_AGENTS];
+    let straight_on = [Forecast::default(); MAX_AGENTS];
+    planner.prepare(lane_id, start, 100.0, &[car], &none, &straight_on, morph, p);
+    for i in 0..=80 {
+        for j in 0..=30 {
+            let (s, l) = (s_car - 8.0 + 0.2 * i as f64, -3.0 + 0.2 * j as f64);
+            let (ego, h, _) = lane.to_cartesian(s, l, 0);
+            let meets = rectangles_meet(ego, h, (hl, hw), pos, h_car, grow(-0.06));
+            let near = rectangles_meet(ego, h, (hl, hw), pos, h_car, grow(0.06));
+            let hit = planner.occupancy.hit(0, s, l);
+            let at = || {
+                format!("lane {lane_id}: car at ({s_car}, {l_car}) turned {turn}, ego at ({s:.1}, {l:.1})")
+            };
+            if meets {
+                assert_eq!(hit, Hit::Contact, "{}", at());
+                checked[0] += 1;
+            } else if !near {
+                assert_ne!(hit, Hit::Contact, "{}", at());
+                checked[1] += 1;
+            }
+        }
+    }
 }
 
 /// The request log holds requests, not cycles: ids between two requests are unknown, and a

@@ -316,6 +316,57 @@ fn a_car_across_a_straight_lane_blocks_exactly_the_minkowski_box_of_the_two_rect
 }
 
 #[test]
+fn the_planning_window_keeps_a_car_beside_the_lane_whose_grown_box_the_ego_can_reach() {
+    // A car standing across a straight lane, its centre l m beside it: its box reaches
+    // across the lane to l − (w/2 + hl + growth × t + clearance), which by the horizon's end
+    // is within the ego's 1 m lateral bound. The window that culls road users before their
+    // boxes are built keeps it, without growth, and with a fast one and no clearance.
+    use concord_core::scene::{Lane, Turn, Vec2};
+    let straight = Lane::new(
+        &[Vec2::new(0.0, 0.0), Vec2::new(200.0, 0.0)],
+        1.75,
+        50.0,
+        Turn::Straight,
+    )
+    .expect("a lane");
+    let morph = Morphology::new(&[straight]).expect("a map");
+    let start = FrenetState {
+        s: 5.0,
+        ds: 4.0,
+        ..FrenetState::default()
+    };
+    for (growth, margin, l) in [(0.0, 0.5, 4.8), (1.0, 0.0, 9.3)] {
+        let p = concord_core::params::TrajectoryParams {
+            margin_growth_mps: growth,
+            safety_margin_m: margin,
+            ..Params::default().trajectory
+        };
+        let beside = AgentState::moving(1, Vec2::new(15.0, l), core::f64::consts::FRAC_PI_2, 0.0);
+        let mut planner = Planner::default();
+        planner.prepare(
+            0,
+            start,
+            100.0,
+            &[beside],
+            &[ProcessState::default(); MAX_AGENTS],
+            &[Forecast::default(); MAX_AGENTS],
+            &morph,
+            &p,
+        );
+        let last = 49;
+        let grown = growth * (last + 1) as f64 * p.dt_s;
+        let reach = 0.5 * p.vehicle_width_m + 0.5 * p.vehicle_length_m + grown + p.safety_margin_m;
+        let b: Vec<_> = planner.occupancy.boxes(last).collect();
+        assert_eq!(b.len(), 1, "growth {growth}");
+        assert!(
+            (b[0].2 - (l - reach)).abs() < 1e-6,
+            "growth {growth}: {:?}",
+            b[0]
+        );
+    }
+}
+
+#[test]
 fn every_evaluated_candidate_is_counted_under_one_verdict() {
     // From 5 m/s, reaching 20 m/s within about a second breaks the acceleration limit: every
     // candidate is a limit reject, and the counts add up to the candidates evaluated.
