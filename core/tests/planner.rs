@@ -249,13 +249,10 @@ fn a_road_user_far_from_every_reachable_point_leaves_no_box() {
     assert!((0..50).all(|k| planner.occupancy.boxes(k).count() == 1));
 }
 
-#[test]
-fn a_car_across_a_straight_lane_blocks_exactly_the_minkowski_box_of_the_two_rectangles() {
-    // Standing across a straight lane, 10 m ahead of the ego: at step k its rectangle,
-    // longer by the growth 0.2 m/s × t, plus the ego's and the 0.5 m clearance, is a box of
-    // half extents hl + w/2 + 0.5 along the lane and w/2 + (hl + growth) + 0.5 across it.
+/// A planner on a straight 200 m lane along x, the ego 5 m along it at 4 m/s, with `agent`
+/// standing still (predicted straight on) and trajectory parameters `p`.
+fn planner_on_a_straight(agent: AgentState, p: &concord_core::params::TrajectoryParams) -> Planner {
     use concord_core::scene::{Lane, Turn, Vec2};
-    let p = Params::default().trajectory;
     let straight = Lane::new(
         &[Vec2::new(0.0, 0.0), Vec2::new(200.0, 0.0)],
         1.75,
@@ -264,23 +261,34 @@ fn a_car_across_a_straight_lane_blocks_exactly_the_minkowski_box_of_the_two_rect
     )
     .expect("a lane");
     let morph = Morphology::new(&[straight]).expect("a map");
-    let across = AgentState::moving(1, Vec2::new(15.0, 0.0), core::f64::consts::FRAC_PI_2, 0.0);
-    let mut planner = Planner::default();
     let start = FrenetState {
         s: 5.0,
         ds: 4.0,
         ..FrenetState::default()
     };
+    let mut planner = Planner::default();
     planner.prepare(
         0,
         start,
         100.0,
-        &[across],
+        &[agent],
         &[ProcessState::default(); MAX_AGENTS],
         &[Forecast::default(); MAX_AGENTS],
         &morph,
-        &p,
+        p,
     );
+    planner
+}
+
+#[test]
+fn a_car_across_a_straight_lane_blocks_exactly_the_minkowski_box_of_the_two_rectangles() {
+    // Standing across a straight lane, 10 m ahead of the ego: at step k its rectangle,
+    // longer by the growth 0.2 m/s × t, plus the ego's and the 0.5 m clearance, is a box of
+    // half extents hl + w/2 + 0.5 along the lane and w/2 + (hl + growth) + 0.5 across it.
+    use concord_core::scene::Vec2;
+    let p = Params::default().trajectory;
+    let across = AgentState::moving(1, Vec2::new(15.0, 0.0), core::f64::consts::FRAC_PI_2, 0.0);
+    let planner = planner_on_a_straight(across, &p);
     let (hl, hw, m) = (
         0.5 * p.vehicle_length_m,
         0.5 * p.vehicle_width_m,
@@ -288,18 +296,7 @@ fn a_car_across_a_straight_lane_blocks_exactly_the_minkowski_box_of_the_two_rect
     );
     // Beside the lane, 6 m to either side, beyond any offset the ego may take: no box.
     for l in [-6.0, 6.0] {
-        let beside = AgentState::moving(1, Vec2::new(15.0, l), 0.0, 0.0);
-        let mut apart = Planner::default();
-        apart.prepare(
-            0,
-            start,
-            100.0,
-            &[beside],
-            &[ProcessState::default(); MAX_AGENTS],
-            &[Forecast::default(); MAX_AGENTS],
-            &morph,
-            &p,
-        );
+        let apart = planner_on_a_straight(AgentState::moving(1, Vec2::new(15.0, l), 0.0, 0.0), &p);
         assert_eq!(apart.occupancy.boxes(0).count(), 0, "l {l}");
     }
     for k in [0, 9, 49] {
@@ -321,38 +318,19 @@ fn the_planning_window_keeps_a_car_beside_the_lane_whose_grown_box_the_ego_can_r
     // across the lane to l − (w/2 + hl + growth × t + clearance), which by the horizon's end
     // is within the ego's 1 m lateral bound. The window that culls road users before their
     // boxes are built keeps it, without growth, and with a fast one and no clearance.
-    use concord_core::scene::{Lane, Turn, Vec2};
-    let straight = Lane::new(
-        &[Vec2::new(0.0, 0.0), Vec2::new(200.0, 0.0)],
-        1.75,
-        50.0,
-        Turn::Straight,
-    )
-    .expect("a lane");
-    let morph = Morphology::new(&[straight]).expect("a map");
-    let start = FrenetState {
-        s: 5.0,
-        ds: 4.0,
-        ..FrenetState::default()
-    };
     for (growth, margin, l) in [(0.0, 0.5, 4.8), (1.0, 0.0, 9.3)] {
         let p = concord_core::params::TrajectoryParams {
             margin_growth_mps: growth,
             safety_margin_m: margin,
             ..Params::default().trajectory
         };
-        let beside = AgentState::moving(1, Vec2::new(15.0, l), core::f64::consts::FRAC_PI_2, 0.0);
-        let mut planner = Planner::default();
-        planner.prepare(
-            0,
-            start,
-            100.0,
-            &[beside],
-            &[ProcessState::default(); MAX_AGENTS],
-            &[Forecast::default(); MAX_AGENTS],
-            &morph,
-            &p,
+        let beside = AgentState::moving(
+            1,
+            concord_core::scene::Vec2::new(15.0, l),
+            core::f64::consts::FRAC_PI_2,
+            0.0,
         );
+        let planner = planner_on_a_straight(beside, &p);
         let last = 49;
         let grown = growth * (last + 1) as f64 * p.dt_s;
         let reach = 0.5 * p.vehicle_width_m + 0.5 * p.vehicle_length_m + grown + p.safety_margin_m;
