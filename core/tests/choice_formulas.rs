@@ -136,6 +136,23 @@ fn decelerate_approaches_stops_or_slows_by_where_its_yield_point_is() {
     close(stop.accel, -100.0 / 30.0);
     close(stop.duration, 3.0);
     close(stop.stop_m, 15.0);
+    // A longer check time τ = 2 s, 12 m ahead: 2v_a + v_a²/4 = 12, v_a = 2(√16 − 2) = 4.
+    let slow_check = profile(
+        Maneuver::Decelerate,
+        &EgoContext {
+            yield_distance: 12.0,
+            yield_check_s: 2.0,
+            ..wide(1.0)
+        },
+        &p,
+    );
+    close(slow_check.target_speed, 4.0);
+    // Exactly at the approach speed (3 m ahead: v_a = 2(√4 − 1) = 2): a stop, not an approach.
+    close(at(2.0, 3.0, 20.0).target_speed, 0.0);
+    // Exactly reachable with one stopping polynomial (2d = 30 m = 10 m/s × 3 s): a stop.
+    let reach = at(10.0, 15.0, 3.0);
+    close(reach.target_speed, 0.0);
+    close(reach.duration, 3.0);
     // Exactly `CREEP_FROM_M` (1 m) short of the point is near it: a stop, not an approach.
     let near = at(0.5, 1.0, 20.0);
     close(near.target_speed, 0.0);
@@ -359,8 +376,8 @@ fn the_expected_wait_is_the_longest_of_the_arriving_road_users_whose_passage_is_
     let arriving = pair([5.0, 10.0], [20.0, 30.0], 10.0);
     let (_, a_out) = proceeding_interval(&arriving, &ip);
     close(a_out, 3.0);
-    // A passage the ego is already in, or exactly at, and a road user beyond the TTC cap,
-    // count for nothing, however long they would take.
+    // A passage the ego is already in, or exactly at, and road users at or beyond the TTC
+    // cap, count for nothing, however long they would take.
     let slow = [200.0, 300.0];
     let entered = pair([-1.0, 3.0], slow, 10.0);
     let at_entry = pair([0.0, 3.0], slow, 10.0);
@@ -368,9 +385,13 @@ fn the_expected_wait_is_the_longest_of_the_arriving_road_users_whose_passage_is_
         agent_ttc_s: opm.ttc_max_s + 1.0,
         ..pair([5.0, 10.0], slow, 10.0)
     };
+    let at_cap = ConflictPair {
+        agent_ttc_s: opm.ttc_max_s,
+        ..far
+    };
     let wait = expected_wait(
-        &[entered, arriving, at_entry, far],
-        &[0.0, 0.25, 0.0, 0.0],
+        &[entered, arriving, at_entry, far, at_cap],
+        &[0.0, 0.25, 0.0, 0.0, 0.0],
         &opm,
         &ip,
     );
@@ -414,14 +435,14 @@ fn the_scene_state_places_a_passed_conflict_and_counts_the_risky_ones() {
 fn the_history_samples_every_tenth_of_a_second_and_keeps_each_maneuvers_closest_state() {
     let mut h = ChoiceHistory::default();
     let s = |a: f64, b: f64| [a, b, 0.0, 0.0, 0.0, 0.0];
-    h.record(0.0, s(1.0, 0.0), Maneuver::KeepSpeed);
+    h.record(0.0, s(-1.0, 0.0), Maneuver::KeepSpeed);
     h.record(0.05, s(0.0, 1.0), Maneuver::Decelerate);
     h.record(0.1, s(0.0, 1.0), Maneuver::KeepSpeed);
     h.record(0.2, s(-1.0, 0.0), Maneuver::Accelerate);
     assert_eq!(h.records().len(), 3, "{:?}", h.records());
     assert_eq!(h.previous, Some(Maneuver::Accelerate));
-    // Keep speed was executed in states at 45° and 135° from the query: the closer counts.
-    // Accelerate only in the opposite one: its similarity is −1, not "never".
+    // Keep speed was executed in states at 135° and then 45° from the query: the closer
+    // counts. Accelerate only at 135°: its similarity is −√½, not "never".
     let d = h.d_prev(&s(1.0, 1.0));
     close(d[Maneuver::KeepSpeed.index()], 0.5f64.sqrt());
     close(d[Maneuver::Accelerate.index()], -(0.5f64.sqrt()));
@@ -489,6 +510,30 @@ fn a_maneuver_that_goes_is_judged_at_the_slower_timing_that_lets_the_other_pass_
         let u: f64 = p.beta.iter().zip(x).map(|(b, x)| b * x).sum();
         close(out.utility[i], u);
     }
+}
+
+#[test]
+fn among_equally_good_timings_the_nominal_one_stands_and_a_crawl_has_no_other() {
+    let p = ChoiceParams::default();
+    // At the goal with nothing around, every timing of "accelerate" (0 → 4.5 m/s over the
+    // 3 s horizon, or 0.8 and 0.6 of it) is equally good: the nominal stands.
+    let at_goal = EgoContext {
+        goal_distance: 0.0,
+        ..wide(0.0)
+    };
+    let out = choose_one(&[], &OpmTriplet::default(), &at_goal, &p);
+    close(out.profiles[Maneuver::Accelerate.index()].target_speed, 4.5);
+    // The scene of the slower-timing test at a crawl (0.9 m/s, 1.8 m from its passage):
+    // below 1 m/s a maneuver is judged at its nominal timing only.
+    let c = pair([1.8, 5.0], [12.0, 20.0], 10.0);
+    let crawl = EgoContext {
+        speed_cap: 10.0,
+        yield_distance: 1.0,
+        goal_distance: 28.0,
+        ..wide(0.9)
+    };
+    let out = choose_one(&[c], &OpmTriplet::default(), &crawl, &p);
+    close(out.profiles[Maneuver::KeepSpeed.index()].target_speed, 0.9);
 }
 
 #[test]

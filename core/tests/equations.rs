@@ -1923,6 +1923,10 @@ fn request_log_keeps_requests_by_time() {
     assert!(!log.due(0.07 + 0.024, 0.05));
     assert!(log.due(0.07 + 0.026, 0.05));
     assert!(log.due(0.01, 0.05), "the clock went back");
+    // Due at exactly half the period.
+    log.issue(9, 1.0);
+    assert!(!log.due(1.25, 1.0));
+    assert!(log.due(1.5, 1.0));
 }
 
 #[test]
