@@ -1729,7 +1729,7 @@ fn the_drive_on_search_keeps_the_latest_contact() {
                 latest.windows(2).all(|w| w[1] >= w[0]),
                 "CAV {cav_before} m, HDV {hdv_before} m: {latest:?}"
             );
-            if latest.len() == 4 && latest[3] > latest[0] {
+            if latest.len() == 4 && latest[3] > latest[0] && latest[3].is_finite() {
                 rose += 1;
             }
         }

@@ -1736,3 +1736,58 @@ fn decelerating_behind_a_leader_that_brakes_to_a_stop_stops_behind_it() {
         .stop_m
         .is_infinite());
 }
+
+#[test]
+fn the_fallback_takes_the_drive_on_that_postpones_contact_longest_the_first_among_equals() {
+    // The ego's footprint in the crossing car's path (as in the test above): creeping on at
+    // 1 m/s is hit about when braking is, which inside the junction still beats standing, but
+    // driving off at 5 or 10 m/s is hit by nothing: the fallback takes the later contact, and
+    // of two without any, the first (gentler) profile.
+    let p = Params::default().trajectory;
+    let lane = *plain_crossing().lane(0);
+    let profile = |accel: f64, target_speed: f64| Profile {
+        accel,
+        target_speed,
+        duration: 3.0,
+        stop_m: f64::INFINITY,
+    };
+    let (creep, brisk, fast) = (profile(0.5, 1.0), profile(2.0, 5.0), profile(3.0, 10.0));
+    let taken = |drive_on: &[Profile]| {
+        let (x, car) = beside_a_passing_car(-0.3, 4.0);
+        let mut planner = standing_at(x, &car, &[Forecast::default(); MAX_AGENTS]);
+        let mut out = concord_core::Trajectory::default();
+        let k = planner.fallback(0.0, &lane, drive_on, 1, &p, &mut out);
+        (k, planner.first_collision(&out))
+    };
+    let (k, hit) = taken(&[creep]);
+    assert_eq!(k, Some(0));
+    assert!(hit.is_some(), "creeping is hit too");
+    assert_eq!(taken(&[creep, fast]), (Some(1), None));
+    assert_eq!(taken(&[brisk, fast]), (Some(0), None));
+}
+
+#[test]
+fn outside_the_junction_the_fallback_brakes_rather_than_meet_an_oncoming_car_sooner() {
+    // A car coming head-on along the ego's lane at 8 m/s, 20 m away: braking is hit at about
+    // 1.9 s, creeping on a little sooner. Before the stop line and past the crossing, braking
+    // stands; inside the junction, where standing blocks the crossing lane, the ego drives on
+    // (its own hit is within DRIVE_ON_STEPS of the braking's).
+    let p = Params::default().trajectory;
+    let lane = *plain_crossing().lane(0);
+    let creep = Profile {
+        accel: 0.5,
+        target_speed: 1.0,
+        duration: 3.0,
+        stop_m: f64::INFINITY,
+    };
+    let taken = |x: f64| {
+        let car = AgentState::moving(1, Vec2::new(x + 20.0, 0.0), core::f64::consts::PI, 8.0);
+        let mut planner = standing_at(x, &[car], &[Forecast::default(); MAX_AGENTS]);
+        let mut out = concord_core::Trajectory::default();
+        let k = planner.fallback(0.0, &lane, &[creep], 1, &p, &mut out);
+        (k, planner.first_collision(&out).is_some())
+    };
+    assert_eq!(taken(-30.0), (None, true), "before the stop line");
+    assert_eq!(taken(20.0), (None, true), "past the crossing");
+    assert_eq!(taken(-3.0).0, Some(0), "inside the junction");
+}
