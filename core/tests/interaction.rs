@@ -1204,6 +1204,32 @@ fn beside_a_passing_car(gap: f64, t: f64) -> (f64, [AgentState; 1]) {
     (x, [car])
 }
 
+/// A profile that does not yield: `accel` m/s² towards `target_speed` m/s over 3 s.
+fn drive_on(accel: f64, target_speed: f64) -> Profile {
+    Profile {
+        accel,
+        target_speed,
+        duration: 3.0,
+        stop_m: f64::INFINITY,
+    }
+}
+
+/// [`Planner::fallback`] for the ego standing at `x` among `cars` on [`plain_crossing`]'s first
+/// lane, stopping at once: the profile taken and the first footprint collision of the
+/// trajectory it gives, s.
+fn fallback_standing_at(
+    x: f64,
+    cars: &[AgentState],
+    drive_on: &[Profile],
+) -> (Option<usize>, Option<f64>) {
+    let p = Params::default().trajectory;
+    let lane = *plain_crossing().lane(0);
+    let mut planner = standing_at(x, cars, &[Forecast::default(); MAX_AGENTS]);
+    let mut out = concord_core::Trajectory::default();
+    let taken = planner.fallback(0.0, &lane, drive_on, 1, &p, &mut out);
+    (taken, planner.first_collision(&out))
+}
+
 #[test]
 fn a_car_waiting_beside_a_crossing_lane_stays_out_of_its_traffics_way() {
     // The ego's front 0.9 m from the side of the crossing lane's car (outside its lane's
@@ -1229,24 +1255,18 @@ fn the_fallback_drives_on_only_when_braking_itself_would_be_hit() {
     // (which a contact-free candidate could). With the footprints overlapping it drives on.
     let p = Params::default().trajectory;
     let lane = *plain_crossing().lane(0);
-    let go = Profile {
-        accel: 3.0,
-        target_speed: 10.0,
-        duration: 3.0,
-        stop_m: f64::INFINITY,
-    };
     let fallback = |gap: f64| {
         let (x, car) = beside_a_passing_car(gap, 4.0);
-        let mut planner = standing_at(x, &car, &[Forecast::default(); MAX_AGENTS]);
-        let mut out = concord_core::Trajectory::default();
-        let braking = {
-            let mut b = concord_core::Trajectory::default();
-            planner.minimum_risk(f64::INFINITY, &lane, &p, &mut b);
-            (planner.first_contact(&b), planner.first_collision(&b))
-        };
+        let planner = standing_at(x, &car, &[Forecast::default(); MAX_AGENTS]);
+        let mut braking = concord_core::Trajectory::default();
+        planner.minimum_risk(f64::INFINITY, &lane, &p, &mut braking);
+        let (taken, _) = fallback_standing_at(x, &car, &[drive_on(3.0, 10.0)]);
         (
-            planner.fallback(0.0, &lane, &[go], 1, &p, &mut out),
-            braking,
+            taken,
+            (
+                planner.first_contact(&braking),
+                planner.first_collision(&braking),
+            ),
         )
     };
     let (taken, (contact, collision)) = fallback(0.3);
@@ -1743,21 +1763,10 @@ fn the_fallback_takes_the_drive_on_that_postpones_contact_longest_the_first_amon
     // 1 m/s is hit about when braking is, which inside the junction still beats standing, but
     // driving off at 5 or 10 m/s is hit by nothing: the fallback takes the later contact, and
     // of two without any, the first (gentler) profile.
-    let p = Params::default().trajectory;
-    let lane = *plain_crossing().lane(0);
-    let profile = |accel: f64, target_speed: f64| Profile {
-        accel,
-        target_speed,
-        duration: 3.0,
-        stop_m: f64::INFINITY,
-    };
-    let (creep, brisk, fast) = (profile(0.5, 1.0), profile(2.0, 5.0), profile(3.0, 10.0));
-    let taken = |drive_on: &[Profile]| {
+    let (creep, brisk, fast) = (drive_on(0.5, 1.0), drive_on(2.0, 5.0), drive_on(3.0, 10.0));
+    let taken = |profiles: &[Profile]| {
         let (x, car) = beside_a_passing_car(-0.3, 4.0);
-        let mut planner = standing_at(x, &car, &[Forecast::default(); MAX_AGENTS]);
-        let mut out = concord_core::Trajectory::default();
-        let k = planner.fallback(0.0, &lane, drive_on, 1, &p, &mut out);
-        (k, planner.first_collision(&out))
+        fallback_standing_at(x, &car, profiles)
     };
     let (k, hit) = taken(&[creep]);
     assert_eq!(k, Some(0));
@@ -1772,22 +1781,83 @@ fn outside_the_junction_the_fallback_brakes_rather_than_meet_an_oncoming_car_soo
     // 1.9 s, creeping on a little sooner. Before the stop line and past the crossing, braking
     // stands; inside the junction, where standing blocks the crossing lane, the ego drives on
     // (its own hit is within DRIVE_ON_STEPS of the braking's).
-    let p = Params::default().trajectory;
-    let lane = *plain_crossing().lane(0);
-    let creep = Profile {
-        accel: 0.5,
-        target_speed: 1.0,
-        duration: 3.0,
-        stop_m: f64::INFINITY,
-    };
     let taken = |x: f64| {
         let car = AgentState::moving(1, Vec2::new(x + 20.0, 0.0), core::f64::consts::PI, 8.0);
-        let mut planner = standing_at(x, &[car], &[Forecast::default(); MAX_AGENTS]);
-        let mut out = concord_core::Trajectory::default();
-        let k = planner.fallback(0.0, &lane, &[creep], 1, &p, &mut out);
-        (k, planner.first_collision(&out).is_some())
+        let (k, hit) = fallback_standing_at(x, &[car], &[drive_on(0.5, 1.0)]);
+        (k, hit.is_some())
     };
     assert_eq!(taken(-30.0), (None, true), "before the stop line");
     assert_eq!(taken(20.0), (None, true), "past the crossing");
     assert_eq!(taken(-3.0).0, Some(0), "inside the junction");
+}
+
+#[test]
+fn the_post_encroachment_check_is_its_definition_on_the_step_grid() {
+    // The ego rolling at 8 m/s towards its passage (4–16 m ahead), a car crossing after it
+    // whose margin keeps the ego out of the passage from 2.5 s on: each of 9600 candidates,
+    // braking or not, is refused exactly when it is in the passage at some moment of the
+    // margin's window, the moments between steps interpolated (entering and leaving where the
+    // straight line between two steps crosses the passage's ends, the step that crosses the
+    // end deciding, not a line from the step before). Some are refused only by that
+    // interpolation: at no step inside after the window opens, out less than 10 ms after it.
+    let p = Params::default().trajectory;
+    let planner = before_a_crossing_car(8.0, -40.0, 8.0, [36.0, 44.0]);
+    let m = planner.margins()[0];
+    let (dt, steps) = (p.dt_s, (p.horizon_s / p.dt_s).round() as usize);
+    let s0 = planner.start.s;
+    let (mut refused, mut kept, mut at_the_edge) = (0, 0, 0);
+    for i in 0..400 {
+        for j in 0..24 {
+            let (t_end, v_end) = (1.0 + 0.01 * i as f64, 0.5 * j as f64);
+            let q = concord_core::trajectory::Quartic::fit(s0, 8.0, 0.0, v_end, 0.0, t_end);
+            let s_at = |t: f64| {
+                if t <= t_end {
+                    q.pos(t)
+                } else {
+                    q.pos(t_end) + v_end * (t - t_end)
+                }
+            };
+            let (mut enters, mut leaves, mut inside_late) = (f64::INFINITY, f64::INFINITY, false);
+            let (mut prev_t, mut prev_s) = (0.0, s0);
+            for k in 1..=steps {
+                let t = k as f64 * dt;
+                let s = s_at(t);
+                let at = |x: f64| prev_t + (x - prev_s) / (s - prev_s) * (t - prev_t);
+                if prev_s < m.s[0] && s >= m.s[0] {
+                    enters = at(m.s[0]);
+                }
+                if prev_s < m.s[1] && s >= m.s[1] && enters.is_finite() {
+                    leaves = at(m.s[1]);
+                    inside_late |= prev_t > m.t[0];
+                }
+                (prev_t, prev_s) = (t, s);
+            }
+            let last = steps as f64 * dt;
+            let violates = enters < m.t[1] && leaves.min(last) > m.t[0];
+            match planner.evaluate(t_end, v_end, 0.0, &p) {
+                Err(Reject::Collision(_)) => {
+                    assert!(
+                        violates,
+                        "T {t_end} v {v_end}: in at {enters}, out at {leaves}, {m:?}"
+                    );
+                    refused += 1;
+                    if leaves.is_finite() && !inside_late && leaves - m.t[0] < 0.01 {
+                        at_the_edge += 1;
+                    }
+                }
+                Ok(_) => {
+                    assert!(
+                        !violates,
+                        "T {t_end} v {v_end}: in at {enters}, out at {leaves}, {m:?}"
+                    );
+                    kept += 1;
+                }
+                Err(_) => {}
+            }
+        }
+    }
+    assert!(
+        refused > 0 && kept > 0 && at_the_edge > 0,
+        "refused {refused}, kept {kept}, at the edge {at_the_edge}"
+    );
 }
