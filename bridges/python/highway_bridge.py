@@ -7,6 +7,7 @@
     python highway_bridge.py --env intersection-v0 --oracle-ceiling --oracle-first \
         --seed-list 0-99,500-599 --json ceiling.json                          # the oracle
     python highway_bridge.py --env intersection-v0 --seed-list 0-99,500-599 --ceiling ceiling.json
+    python highway_bridge.py --env intersection-v0 --rescore run.json --ceiling ceiling.json
 
 Environments (``--env``): ``intersection-v0``, ``intersection-v1`` (its own dynamical action
 kept), ``merge-v0`` and ``roundabout-v0`` (on a map built from its road network), and
@@ -161,11 +162,16 @@ kind of profile reaches; ``--json FILE`` writes it all. ``--ceiling FILE`` (that
 normal run also report its success as a share of the reachable seeds, and list the reachable
 seeds it failed and the unreachable seeds it failed or passed (seeds the oracle left undecided
 are left out and listed); the file must have been measured with the same environment, duration
-and policy frequency.
+and policy frequency. Against a ceiling whose profiles kept rules (``--oracle-courteous``,
+``--oracle-min-pet``) it also counts the arrivals that kept the same rules, judged as the
+oracle judges its profiles (the fair share for a policy that keeps them), and lists the
+reachable seeds it arrived on breaking them. ``--rescore FILE`` reports a run stored with
+``--json`` again, against ``--ceiling`` when given, without running it.
 
 Results: per policy, collision rate, success rate (arrived without collision), mean ego speed
 (over all steps of all episodes) and the number of minimum-risk decisions, then the outcome
-counts, standing time, others' braking, closest distance and (with ``--ceiling``) the ceiling
+counts, standing time, others' braking, closest distance, the arrivals that kept courtesy
+(imposed braking at most 3 m/s²) and PET (at least 1.5 s) and (with ``--ceiling``) the ceiling
 lines; the last line is a one-line summary, and ``--json FILE`` writes every number and each
 episode's outcome.
 """
@@ -1120,12 +1126,21 @@ def summarize(env_name, name, episodes):
                   "min": float(np.min(pets)) if pets else None,
                   "median": float(np.median(pets)) if pets else None,
                   "episodes_below": {str(x): sum(p < x for p in pets) for x in PET_REPORT_S}},
+        # Arrivals that kept the interaction rules, judged as the oracle judges its profiles.
+        "arrived_keeping_rules": {
+            "courteous": sum(e["arrived"] and within_rules(e, {"max_imposed_decel_mps2":
+                                                                HARD_BRAKING_MPS2})
+                             for e in episodes),
+            "courteous_and_pet": sum(e["arrived"] and within_rules(e, KEPT_RULES)
+                                     for e in episodes),
+            **KEPT_RULES},
     }
 
 
 def load_ceiling(path, env_name, spec, policy_frequency):
     """The oracle's JSON (``--oracle-ceiling --json FILE``), checked against this run's
-    environment, duration and policy frequency: {seed: reachable}."""
+    environment, duration and policy frequency: ({seed: reachable}, the rules its profiles
+    kept: ``max_imposed_decel_mps2`` and ``min_pet_s``, None where it kept none)."""
     with open(path, encoding="utf-8") as f:
         data = json.load(f)
     o = data["oracle"]
@@ -1136,15 +1151,36 @@ def load_ceiling(path, env_name, spec, policy_frequency):
         raise SystemExit(f"--ceiling {path} was measured with other settings: "
                          + ", ".join(f"{k} {a} (this run {b})" for k, a, b in mismatch))
     # A seed whose search ran out of budget without an arrival is undecided (None).
-    return {int(r["seed"]): (None if r.get("undecided") and not r["reachable"]
-                             else bool(r["reachable"])) for r in data["seeds"]}
+    reachable = {int(r["seed"]): (None if r.get("undecided") and not r["reachable"]
+                                  else bool(r["reachable"])) for r in data["seeds"]}
+    return reachable, {k: o.get(k) for k in CEILING_RULES}
 
 
-def ceiling_report(episodes, reachable):
-    """Success against the oracle's ceiling, over the seeds of this run that the oracle has."""
+# The rules an oracle's profiles may have kept (``--oracle-courteous``, ``--oracle-min-pet``).
+CEILING_RULES = ("max_imposed_decel_mps2", "min_pet_s")
+# The rules every run's summary counts arrivals against: the interaction rules' courtesy
+# limit and PET target (3 m/s², 1.5 s).
+KEPT_RULES = {"max_imposed_decel_mps2": HARD_BRAKING_MPS2, "min_pet_s": 1.5}
+
+
+def within_rules(e, rules):
+    """Whether episode ``e`` kept the oracle's ``rules`` as the oracle judges its profiles:
+    imposed braking (``ImposedBraking``, the first step left out as there) at most
+    ``max_imposed_decel_mps2``, and no crossing or merge with a PET below ``min_pet_s``."""
+    courteous, min_pet = rules.get("max_imposed_decel_mps2"), rules.get("min_pet_s")
+    return ((courteous is None or e["imposed_decel_mps2"] <= courteous)
+            and (min_pet is None or e["min_pet_s"] is None or e["min_pet_s"] >= min_pet))
+
+
+def ceiling_report(episodes, reachable, rules=None):
+    """Success against the oracle's ceiling, over the seeds of this run that the oracle has;
+    with the ``rules`` its profiles kept, also the arrivals that kept them too: the fair
+    share against a ceiling that a policy keeping those rules can reach."""
+    rules = rules or dict.fromkeys(CEILING_RULES)
     known = [e for e in episodes if reachable.get(e["seed"]) is not None]
     reach = [e for e in known if reachable[e["seed"]]]
     unreach = [e for e in known if not reachable[e["seed"]]]
+    kept = [e for e in reach if e["arrived"] and within_rules(e, rules)]
     return {
         "seeds_in_ceiling": len(known),
         "missing_seeds": [e["seed"] for e in episodes if e["seed"] not in reachable],
@@ -1156,6 +1192,11 @@ def ceiling_report(episodes, reachable):
         "unreachable_passed": [e["seed"] for e in unreach if e["arrived"]],
         "undecided": [e["seed"] for e in episodes
                       if e["seed"] in reachable and reachable[e["seed"]] is None],
+        "rules": rules,
+        "arrived_within_rules_on_reachable": len(kept),
+        "success_within_rules_of_reachable": (len(kept) / len(reach)) if reach else None,
+        "reachable_arrived_breaking_rules": [e["seed"] for e in reach if e["arrived"]
+                                             and not within_rules(e, rules)],
     }
 
 
@@ -1200,6 +1241,11 @@ def detail_lines(s):
                      f"{p['episodes']} episodes with an encroachment, min {p['min']:.2f} s, "
                      f"median of episode minima {p['median']:.2f} s, episodes below "
                      + ", ".join(f"{x} s: {n}" for x, n in p["episodes_below"].items()))
+    k = s.get("arrived_keeping_rules")
+    if k is not None:
+        lines.append(f"arrivals keeping the rules: courteous (imposed braking <= "
+                     f"{k['max_imposed_decel_mps2']:g} m/s²) {k['courteous']}, and PET >= "
+                     f"{k['min_pet_s']:g} s too {k['courteous_and_pet']}")
     c = s.get("ceiling")
     if c is not None:
         share = ("n/a" if c["success_of_reachable"] is None
@@ -1208,6 +1254,17 @@ def detail_lines(s):
                      f"arrived on {c['arrived_on_reachable']} of them: success {share} of "
                      f"reachable")
         lines.append(f"ceiling: reachable seeds failed {c['reachable_failed']}")
+        r = c.get("rules") or {}
+        kept = [f"imposed braking <= {r['max_imposed_decel_mps2']:g} m/s²"
+                if r.get("max_imposed_decel_mps2") is not None else None,
+                f"PET >= {r['min_pet_s']:g} s" if r.get("min_pet_s") is not None else None]
+        kept = [k for k in kept if k]
+        if kept:
+            share = ("n/a" if c["success_within_rules_of_reachable"] is None
+                     else f"{100 * c['success_within_rules_of_reachable']:.1f} %")
+            lines.append(f"ceiling: within its rules ({', '.join(kept)}) on "
+                         f"{c['arrived_within_rules_on_reachable']} of them: {share} of reachable; "
+                         f"arrived breaking them {c['reachable_arrived_breaking_rules']}")
         lines.append(f"ceiling: unreachable seeds failed {c['unreachable_failed']}, passed "
                      f"{c['unreachable_passed']}")
         if c["undecided"]:
@@ -1215,6 +1272,34 @@ def detail_lines(s):
         if c["missing_seeds"]:
             lines.append(f"ceiling: seeds not in the ceiling file {c['missing_seeds']}")
     return lines
+
+
+def rescore(args, spec, reachable, rules):
+    """``--rescore FILE``: the summary of a run stored with ``--json`` recomputed, against
+    ``--ceiling`` when given, without running it again (a ceiling takes longer than a run)."""
+    with open(args.rescore, encoding="utf-8") as f:
+        stored = json.load(f)
+    s0 = stored["summary"]
+    mismatch = [(k, s0.get(k), v) for k, v in (("env", args.env),
+                                               ("duration_s", spec["duration_s"]),
+                                               ("policy_frequency_hz", args.policy_frequency))
+                if s0.get(k) != v]
+    if mismatch:
+        raise SystemExit(f"--rescore {args.rescore} was run with other settings: "
+                         + ", ".join(f"{k} {a} (this call {b})" for k, a, b in mismatch))
+    episodes = stored["episodes"]
+    s = summarize(s0["env"], s0["policy"], episodes)
+    for k in ("policy_frequency_hz", "duration_s", "wall_time_s"):
+        s[k] = s0[k]
+    if reachable is not None:
+        s["ceiling"] = ceiling_report(episodes, reachable, rules)
+    for line in detail_lines(s):
+        print(line)
+    print(summary_line(s))
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump({"summary": s, "episodes": episodes, "args": stored["args"]}, f, indent=1)
+    return s
 
 
 def summary_line(s):
@@ -1261,6 +1346,9 @@ def main(argv=None):
     ap.add_argument("--ceiling", default=None,
                     help="the oracle's JSON (--oracle-ceiling --json): also report success as "
                     "a share of the seeds the oracle reaches")
+    ap.add_argument("--rescore", default=None, metavar="FILE",
+                    help="report a run stored with --json again (against --ceiling when given) "
+                         "instead of running one; --env and --duration must match it")
     ap.add_argument("--oracle-ceiling", action="store_true",
                     help="instead of running a policy, find for each seed whether any ego "
                     "speed profile of the oracle's family arrives (highway_oracle.py)")
@@ -1298,8 +1386,10 @@ def main(argv=None):
     if args.config is None:
         default = os.path.join(ROOT, "deploy", spec["config"])
         args.config = default if os.path.exists(default) else None
-    reachable = (load_ceiling(args.ceiling, args.env, spec, args.policy_frequency)
-                 if args.ceiling else None)
+    reachable, rules = (load_ceiling(args.ceiling, args.env, spec, args.policy_frequency)
+                        if args.ceiling else (None, None))
+    if args.rescore:
+        return rescore(args, spec, reachable, rules)
 
     period = 1.0 / args.policy_frequency
     env = make_env(args.env, args.policy, args.policy_frequency, spec)
@@ -1335,7 +1425,7 @@ def main(argv=None):
     s["duration_s"] = spec["duration_s"]
     s["wall_time_s"] = time.monotonic() - started
     if reachable is not None:
-        s["ceiling"] = ceiling_report(episodes, reachable)
+        s["ceiling"] = ceiling_report(episodes, reachable, rules)
     print(f"decisions {s['decisions']} for {s['steps']} steps, minimum-risk "
           f"{s['minimum_risk_decisions']}, decision timeouts {s['timeouts']}")
     for line in detail_lines(s):

@@ -471,6 +471,64 @@ class EpisodeFields(unittest.TestCase):
         self.assertNotEqual(proc.returncode, 0)
         self.assertIn("other settings", proc.stderr)
 
+    def test_arrivals_count_within_the_ceilings_rules_only_when_they_keep_them(self):
+        sys.path.insert(0, HERE)
+        import highway_bridge as hb
+
+        def ep(seed, arrived, imposed=0.0, pet=None):
+            return {"seed": seed, "arrived": arrived, "imposed_decel_mps2": imposed,
+                    "min_pet_s": pet}
+
+        episodes = [ep(0, True), ep(1, True, imposed=3.0, pet=1.5), ep(2, True, imposed=3.1),
+                    ep(3, True, pet=1.49), ep(4, False), ep(5, True, imposed=9.0)]
+        reachable = {0: True, 1: True, 2: True, 3: True, 4: True, 5: False}
+        rules = {"max_imposed_decel_mps2": 3.0, "min_pet_s": 1.5}
+        c = hb.ceiling_report(episodes, reachable, rules)
+        # Limits inclusive, no encroachment keeps the PET rule; an unreachable seed never counts.
+        self.assertEqual(c["arrived_on_reachable"], 4)
+        self.assertEqual(c["arrived_within_rules_on_reachable"], 2)
+        self.assertAlmostEqual(c["success_within_rules_of_reachable"], 2 / 5)
+        self.assertEqual(c["reachable_arrived_breaking_rules"], [2, 3])
+        # Courtesy alone: the short PET no longer breaks anything.
+        c = hb.ceiling_report(episodes, reachable, {"max_imposed_decel_mps2": 3.0,
+                                                    "min_pet_s": None})
+        self.assertEqual(c["reachable_arrived_breaking_rules"], [2])
+        # Every summary counts the arrivals keeping courtesy (3 m/s²) and PET (1.5 s).
+        base = self.result["episodes"][0]
+        full = [{**base, **e, "crashed": False} for e in episodes]
+        k = hb.summarize("intersection-v0", "concord", full)["arrived_keeping_rules"]
+        self.assertEqual((k["courteous"], k["courteous_and_pet"]), (3, 2))  # seeds 0, 1, 3; 0, 1
+        self.assertIn("arrivals keeping the rules: courteous (imposed braking <= 3 m/s²) 0, and "
+                      "PET >= 1.5 s too 0", self.stdout)
+        # A ceiling without rules: every arrival keeps them, and no rules line is printed.
+        c = hb.ceiling_report(episodes, reachable)
+        self.assertEqual(c["arrived_within_rules_on_reachable"], c["arrived_on_reachable"])
+        self.assertFalse(any("within its rules" in line for line in hb.detail_lines(
+            {**self.result["summary"], "ceiling": c})))
+
+    def test_a_stored_run_is_rescored_against_a_ceiling_with_rules(self):
+        stored = os.path.join(self.tmp.name, "run.json")
+        with open(stored, "w", encoding="utf-8") as f:
+            json.dump(self.result, f)
+        ruled = os.path.join(self.tmp.name, "ceiling_rules.json")
+        with open(ruled, "w", encoding="utf-8") as f:
+            json.dump({"oracle": {"env": "intersection-v0", "duration_s": 13.0,
+                                  "policy_frequency_hz": 5, "max_imposed_decel_mps2": 3.0,
+                                  "min_pet_s": 1.5},
+                       "seeds": [{"seed": s, "reachable": True} for s in range(3)]}, f)
+        stdout, again = run_bridge("--rescore", stored, "--ceiling", ruled)
+        self.assertEqual(again["episodes"], self.result["episodes"])
+        for k in ("outcomes", "standing_s", "imposed_braking", "success_rate"):
+            self.assertEqual(again["summary"][k], self.result["summary"][k])
+        c = again["summary"]["ceiling"]
+        self.assertEqual((c["reachable"], c["arrived_within_rules_on_reachable"]), (3, 0))
+        self.assertIn("ceiling: within its rules (imposed braking <= 3 m/s², PET >= 1.5 s) on 0 "
+                      "of them: 0.0 % of reachable; arrived breaking them []", stdout)
+        # A run stored at another duration is refused.
+        proc = run_bridge("--rescore", stored, "--duration", "20", check=False)
+        self.assertNotEqual(proc.returncode, 0)
+        self.assertIn("other settings", proc.stderr)
+
     def test_others_braking_counts_near_living_vehicles_only(self):
         sys.path.insert(0, HERE)
         from types import SimpleNamespace as NS
