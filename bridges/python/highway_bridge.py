@@ -1293,12 +1293,18 @@ def rescore(args, spec, reachable, rules):
         s[k] = s0[k]
     if reachable is not None:
         s["ceiling"] = ceiling_report(episodes, reachable, rules)
+    return report(s, episodes, stored["args"], args.json)
+
+
+def report(s, episodes, run_args, path):
+    """Prints the summary ``s`` (detail lines, then the one-line summary) and, with ``path``,
+    writes it with the episodes and the run's arguments as JSON."""
     for line in detail_lines(s):
         print(line)
     print(summary_line(s))
-    if args.json:
-        with open(args.json, "w", encoding="utf-8") as f:
-            json.dump({"summary": s, "episodes": episodes, "args": stored["args"]}, f, indent=1)
+    if path:
+        with open(path, "w", encoding="utf-8") as f:
+            json.dump({"summary": s, "episodes": episodes, "args": run_args}, f, indent=1)
     return s
 
 
@@ -1428,13 +1434,7 @@ def main(argv=None):
         s["ceiling"] = ceiling_report(episodes, reachable, rules)
     print(f"decisions {s['decisions']} for {s['steps']} steps, minimum-risk "
           f"{s['minimum_risk_decisions']}, decision timeouts {s['timeouts']}")
-    for line in detail_lines(s):
-        print(line)
-    print(summary_line(s))
-    if args.json:
-        with open(args.json, "w", encoding="utf-8") as f:
-            json.dump({"summary": s, "episodes": episodes, "args": vars(args)}, f, indent=1)
-    return s
+    return report(s, episodes, vars(args), args.json)
 
 
 def parse_seeds(text):
