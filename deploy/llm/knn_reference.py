@@ -5,7 +5,7 @@ Reads the sets of `concord learn dataset` (default results/learn) and reports, o
 scenes, the accuracy of the logit's favourite (the P_n line's argmax) and of k-nearest-neighbour
 votes over the numbers each prompt states (route, P_n, the ego's line, the most salient
 conflict's times, the implicit intent's shares, right of way, the number of road users),
-standardised, with the training scenes as neighbours. numpy only.
+standardised, with the training scenes as neighbours, in all and per scenario. numpy only.
 
     .venv-train/bin/python deploy/llm/knn_reference.py [DATA_DIR]
 """
@@ -63,12 +63,17 @@ def main() -> int:
     x, z = (x - mu) / sd, (z - mu) / sd
     labels = [s["label"] for s in train]
     for k in (1, 5, 15):
-        ok = 0
+        by_scenario = collections.defaultdict(lambda: [0, 0])
         for row, s in zip(z, test):
             nearest = np.argsort(((x - row) ** 2).sum(1))[:k]
             vote = collections.Counter(labels[i] for i in nearest).most_common(1)[0][0]
-            ok += vote == s["label"]
-        print(f"{k}-nearest neighbours: {100 * ok / len(test):.1f} %")
+            for key in ("all", s.get("scenario", "?")):
+                by_scenario[key][0] += vote == s["label"]
+                by_scenario[key][1] += 1
+        ok, n = by_scenario.pop("all")
+        parts = ", ".join(f"{name} {100 * c / m:.0f} % of {m}"
+                          for name, (c, m) in sorted(by_scenario.items()))
+        print(f"{k}-nearest neighbours: {100 * ok / n:.1f} % ({parts})")
     return 0
 
 
