@@ -67,10 +67,9 @@ def main() -> int:
         for row, s in zip(z, test):
             nearest = np.argsort(((x - row) ** 2).sum(1))[:k]
             vote = collections.Counter(labels[i] for i in nearest).most_common(1)[0][0]
-            for key in ("all", s.get("scenario", "?")):
-                by_scenario[key][0] += vote == s["label"]
-                by_scenario[key][1] += 1
-        ok, n = by_scenario.pop("all")
+            by_scenario[s.get("scenario", "?")][0] += vote == s["label"]
+            by_scenario[s.get("scenario", "?")][1] += 1
+        ok, n = (sum(v) for v in zip(*by_scenario.values()))
         parts = ", ".join(f"{name} {100 * c / m:.0f} % of {m}"
                           for name, (c, m) in sorted(by_scenario.items()))
         print(f"{k}-nearest neighbours: {100 * ok / n:.1f} % ({parts})")
