@@ -7,8 +7,7 @@
 //!   5–11 m/s; starts ±15 m) driven by Concord logit-only and stopped at a random moment before
 //!   the conflict resolves. The label is the oracle's: the fastest route-consistent maneuver
 //!   that, rolled out for 8 s against copies of the drivers, never brings the cars within 3 m
-//!   ([`best_maneuver`]). Labels are balanced (a quarter each in the training set, none above a third in the
-//!   held-out set). Scene k
+//!   ([`best_maneuver`]). Labels are balanced by one rule in both sets: none above a third. Scene k
 //!   of the training set is drawn from seed k, of the held-out set from seed
 //!   [`HELD_OUT_SEED`] + k: the two never share a seed.
 //! * **Intents** ([`intent_examples`]): messages composed from phrase files
@@ -403,13 +402,14 @@ pub fn dataset(
         println!("wrote {} ({} examples)", path.display(), lines.len());
         Ok(())
     };
-    // Training: the four labels in equal shares, so that the rarest (decelerate) is learned;
-    // held out: none above a third, closer to how often each is best.
-    for (name, n, first, shares) in [
-        ("advice_train.jsonl", advice.0, 0, 4),
-        ("advice_heldout.jsonl", advice.1, HELD_OUT_SEED, 3),
+    // Both sets by one rule, none of the labels above a third: the shares the advisor learns
+    // are the ones it is judged on (equal shares overstated the rarest label, decelerate,
+    // five-fold).
+    for (name, n, first) in [
+        ("advice_train.jsonl", advice.0, 0),
+        ("advice_heldout.jsonl", advice.1, HELD_OUT_SEED),
     ] {
-        let set = labelled_scenes(n, n.div_ceil(shares), first, &SCENARIOS, name)?;
+        let set = labelled_scenes(n, n.div_ceil(3), first, &SCENARIOS, name)?;
         let lines: Vec<_> = set
             .iter()
             .map(|s| {

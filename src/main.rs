@@ -330,7 +330,7 @@ enum LearnArg {
         #[arg(long)]
         config: Option<PathBuf>,
         /// Advice scenes for training (seeds from 0).
-        #[arg(long, default_value_t = 600)]
+        #[arg(long, default_value_t = 1200)]
         advice_train: usize,
         /// Held-out advice scenes (seeds from 500 000).
         #[arg(long, default_value_t = 150)]

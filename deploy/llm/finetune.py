@@ -20,8 +20,10 @@ unpacks it), for `llm.sh start --adapter FILE`.
 
 `promote` replaces the shipped adapter (`deploy/llm/adapters/concord-advisor.gguf`) with a
 candidate only if, on the held-out sets of `concord experiment advisor` (its `summary.json`,
-the "fine-tuned" entry of each), its advice accuracy does not drop and its expected
-calibration error stays within the target (0.05) or at least no worse than the shipped one's.
+the "fine-tuned" entry of each), its advice accuracy does not drop, its expected
+calibration error stays within the target (0.05) or at least no worse than the shipped one's,
+and no intent dimension's strong-and-correct share drops (or strong-and-wrong share rises) by
+more than 0.05, one standard error on the held-out messages.
 
 Needs the packages of `deploy/llm/train-requirements.txt` (`deploy/llm/llm.sh setup-train`).
 """
@@ -245,13 +247,22 @@ def cmd_export(args) -> int:
 
 
 ECE_TARGET = 0.05
+STRONG_WRONG_TARGET = 0.02
+# One standard error of a share measured on about 100 held-out messages: an intent dimension
+# may move this much between two equally good adapters.
+INTENT_SLACK = 0.05
 
 
 def cmd_promote(args) -> int:
     def tuned(path: Path) -> dict:
         try:
             entry = json.loads(path.read_text())["fine-tuned"]
-            return {"accuracy": float(entry["accuracy"]), "ece": float(entry["ece"])}
+            intents = {
+                str(d["dimension"]): (float(d["strong_correct"]), float(d["strong_wrong"]))
+                for d in entry.get("intents", [])
+            }
+            return {"accuracy": float(entry["accuracy"]), "ece": float(entry["ece"]),
+                    "intents": intents}
         except (OSError, ValueError, KeyError, TypeError) as e:
             die(f"{path}: no fine-tuned accuracy and ece ({e}); run `concord experiment advisor`")
 
@@ -264,6 +275,16 @@ def cmd_promote(args) -> int:
     if new["ece"] > max(ECE_TARGET, old["ece"]):
         die(f"not promoted: ECE {new['ece']:.3f} above the target {ECE_TARGET} and the shipped "
             f"{old['ece']:.3f}")
+    for dim, (old_right, old_wrong) in old["intents"].items():
+        if dim not in new["intents"]:
+            die(f"not promoted: {args.new} has no held-out intents for {dim!r}")
+        right, wrong = new["intents"][dim]
+        if right < old_right - INTENT_SLACK:
+            die(f"not promoted: intent {dim} strong and correct {right:.3f}, more than "
+                f"{INTENT_SLACK} below the shipped {old_right:.3f}")
+        if wrong > max(STRONG_WRONG_TARGET, old_wrong) + INTENT_SLACK:
+            die(f"not promoted: intent {dim} strong and wrong {wrong:.3f} above the shipped "
+                f"{old_wrong:.3f} by more than {INTENT_SLACK}")
     args.to.parent.mkdir(parents=True, exist_ok=True)
     tmp = args.to.with_suffix(".tmp")
     tmp.write_bytes(args.adapter.read_bytes())
@@ -282,7 +303,7 @@ def main() -> int:
     t.add_argument("--extra", type=Path, action="append", default=[],
                    help="another JSONL file of examples (repeatable)")
     t.add_argument("--out", type=Path, required=True, help="output directory")
-    t.add_argument("--epochs", type=int, default=3)
+    t.add_argument("--epochs", type=int, default=2)
     t.add_argument("--max-steps", type=int, default=0, help="stop after N steps (0: no limit)")
     t.add_argument("--limit", type=int, default=0, help="use N examples only (0: all)")
     t.add_argument("--batch", type=int, default=8)

@@ -122,8 +122,10 @@ class TinyFineTune(unittest.TestCase):
 
 
 class Promotion(unittest.TestCase):
-    def summary(self, path: Path, accuracy: float, ece: float) -> Path:
-        path.write_text(json.dumps({"fine-tuned": {"accuracy": accuracy, "ece": ece}}))
+    def summary(self, path: Path, accuracy: float, ece: float, style=(0.80, 0.01)) -> Path:
+        intents = [{"dimension": "style", "strong_correct": style[0], "strong_wrong": style[1]}]
+        path.write_text(json.dumps({"fine-tuned": {"accuracy": accuracy, "ece": ece,
+                                                   "intents": intents}}))
         return path
 
     def promote(self, new, old, target: Path):
@@ -133,7 +135,7 @@ class Promotion(unittest.TestCase):
             [sys.executable, str(FINETUNE), "promote", "--adapter", str(cand), "--new", str(new),
              "--old", str(old), "--to", str(target)], capture_output=True, text=True)
 
-    def test_a_candidate_replaces_the_adapter_only_without_losing_accuracy_or_calibration(self):
+    def test_a_candidate_replaces_the_adapter_only_without_losing_accuracy_calibration_or_intents(self):
         with tempfile.TemporaryDirectory() as d:
             d = Path(d)
             target = d / "shipped.gguf"
@@ -147,7 +149,14 @@ class Promotion(unittest.TestCase):
             self.assertNotEqual(uncal.returncode, 0)
             self.assertIn("ECE", uncal.stderr)
             self.assertEqual(target.read_bytes(), b"GGUF shipped")
-            ok = self.promote(self.summary(d / "n3.json", 0.82, 0.05), old, target)
+            deaf = self.promote(self.summary(d / "n4.json", 0.85, 0.03, (0.70, 0.01)), old, target)
+            self.assertNotEqual(deaf.returncode, 0)
+            self.assertIn("intent style strong and correct", deaf.stderr)
+            rash = self.promote(self.summary(d / "n5.json", 0.85, 0.03, (0.80, 0.09)), old, target)
+            self.assertNotEqual(rash.returncode, 0)
+            self.assertIn("intent style strong and wrong", rash.stderr)
+            self.assertEqual(target.read_bytes(), b"GGUF shipped")
+            ok = self.promote(self.summary(d / "n3.json", 0.82, 0.05, (0.76, 0.03)), old, target)
             self.assertEqual(ok.returncode, 0, ok.stderr)
             self.assertEqual(target.read_bytes(), b"GGUF candidate")
 
