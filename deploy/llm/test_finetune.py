@@ -69,6 +69,23 @@ class TinyFineTune(unittest.TestCase):
             "--seed", "3", cwd=ROOT)
         return json.loads((out / "train.json").read_text())
 
+    def test_intent_messages_are_given_intents_repeat_times(self):
+        out = self.dir / "repeat"
+        run(sys.executable, FINETUNE, "train", "--data", self.data, "--out", out,
+            "--intents-repeat", "3", "--max-steps", "1", "--threads", "2", cwd=ROOT)
+        report = json.loads((out / "train.json").read_text())
+        lines = {n: len((self.data / n).read_text().splitlines())
+                 for n in ("advice_train.jsonl", "intents_train.jsonl")}
+        self.assertEqual(report["examples"],
+                         lines["advice_train.jsonl"] + 3 * lines["intents_train.jsonl"], report)
+        self.assertEqual(sum(f.endswith("intents_train.jsonl") for f in report["files"]), 3)
+
+        bad = subprocess.run([sys.executable, str(FINETUNE), "train", "--data", str(self.data),
+                              "--out", str(self.dir / "bad"), "--intents-repeat", "0"],
+                             capture_output=True, text=True, cwd=ROOT)
+        self.assertNotEqual(bad.returncode, 0)
+        self.assertIn("--intents-repeat must be at least 1", bad.stderr)
+
     def test_loss_falls_the_run_repeats_and_the_server_answers_with_the_adapter(self):
         report = self.train(self.dir / "a", 6)
         losses = [s["loss"] for s in report["losses"]]

@@ -66,6 +66,12 @@ pub struct LlmConfig {
     /// prefix and half the scene's. On by default, as the local server loads the adapter
     /// (`deploy/llm/llm.sh start`); turn it off for any other model.
     pub fine_tuned: bool,
+    /// With `fine_tuned`, eHMI texts and replies are phrased by the base model: their requests
+    /// set the server's adapter to scale 0 ([`crate::llm::LlmClient::with_adapter_scale`],
+    /// llama.cpp's per-request `lora` field). The adapter was trained on advice and intents
+    /// only and answers a maneuver name ("accelerate") when asked to phrase. On by default;
+    /// turn it off for a server without that field or with an adapter that also phrases.
+    pub phrase_with_base_model: bool,
 }
 
 impl Default for LlmConfig {
@@ -83,6 +89,7 @@ impl Default for LlmConfig {
             confidence_without_logprobs: 0.5,
             temperature: 0.0,
             fine_tuned: true,
+            phrase_with_base_model: true,
         }
     }
 }
@@ -106,6 +113,12 @@ pub struct AdviceConfig {
     /// risky road users, the passenger's stated intent) is the one last asked about. Above 1:
     /// ask every request.
     pub settled_margin: f64,
+    /// A newer request of another situation cancels the call in flight. Worth it only with a
+    /// server that stops work on a closed connection: llama.cpp's server finishes the task
+    /// anyway (it polls the connection once a second), so the next request starts no sooner
+    /// and the cancelled answer is lost. Off: the call in flight is answered and the newest
+    /// request waits for it.
+    pub cancel_superseded: bool,
 }
 
 impl Default for AdviceConfig {
@@ -117,6 +130,7 @@ impl Default for AdviceConfig {
             reasoning_steps: 0,
             max_tokens: 64,
             settled_margin: 0.6,
+            cancel_superseded: false,
         }
     }
 }

@@ -128,6 +128,14 @@ impl LlmClient {
         b
     }
 
+    /// `body` asking llama.cpp's server to run its first LoRA adapter at `scale` (its per-request
+    /// `lora` field): 0 is the base model, 1 the adapter as loaded. Other servers reject or
+    /// ignore the field.
+    pub fn with_adapter_scale(mut body: Value, scale: f64) -> Value {
+        body["lora"] = json!([{"id": 0, "scale": scale}]);
+        body
+    }
+
     /// Sends `body`, retrying connection failures and 429/5xx while `deadline` leaves at least
     /// `min_attempt_s` for another attempt; each attempt is cut at the deadline.
     pub async fn call(&self, body: &Value, deadline: Instant) -> Result<Reply, LlmError> {

@@ -1,11 +1,11 @@
 //! The sidecar's async side: answers advice requests (eq. 16), parses intents from what people
 //! say (eq. 8, §4.3), and turns decisions into eHMI language (§5).
 //!
-//! * **Advice.** One request at a time, the newest: while a request is in flight, a newer one
-//!   that describes a different situation (another logit favourite, another set of risky
-//!   conflicts, another passenger intent) cancels it, unless the one in flight itself replaced
-//!   a cancelled request (so a slow server still answers every other request); a newer one of
-//!   the same situation waits. A request is not sent at all when the corrected P_n is settled
+//! * **Advice.** One request at a time: while a request is in flight, the newest one waits and
+//!   is asked as soon as it is answered. With `advice.cancel_superseded`, a newer one that
+//!   describes a different situation (another logit favourite, another set of risky conflicts,
+//!   another passenger intent) cancels the call instead, unless the one in flight itself
+//!   replaced a cancelled request (so a slow server still answers every other request). A request is not sent at all when the corrected P_n is settled
 //!   (its favourite leads by `advice.settled_margin`) and the situation is the one last asked
 //!   about: the answer could not matter (counted as settled).
 //!   Every answer, or failure with its reason, is published with the request id and the
@@ -292,10 +292,15 @@ impl Sidecar {
             }
             let work = self.advise(req, Instant::now() + left);
             tokio::pin!(work);
+            // A newer request seen while this one is in flight, taken once it is answered.
+            let mut waiting = false;
             loop {
                 tokio::select! {
                     () = &mut work => {
                         after_cancel = false;
+                        if waiting {
+                            rx.mark_changed();
+                        }
                         continue 'next;
                     }
                     changed = rx.changed() => {
@@ -305,7 +310,10 @@ impl Sidecar {
                         let newer = *rx.borrow();
                         if let Some(n) = newer {
                             self.state().request = Some(n);
-                            if situation(&n) != here && !after_cancel {
+                            if self.cfg.advice.cancel_superseded
+                                && situation(&n) != here
+                                && !after_cancel
+                            {
                                 after_cancel = true;
                                 self.state().counters.cancelled += 1;
                                 // Unseen: the outer loop takes it at once.
@@ -314,6 +322,7 @@ impl Sidecar {
                             }
                         }
                         rx.borrow_and_update();
+                        waiting = true;
                     }
                 }
             }
@@ -786,12 +795,7 @@ impl Sidecar {
         messages: Vec<prompt::ChatMessage>,
     ) -> Result<String, String> {
         let deadline = self.text_deadline();
-        let body = self.client.body(
-            &messages,
-            kind,
-            &schema::phrase_schema(),
-            schema::PHRASE_MAX_TOKENS,
-        );
+        let body = phrase_body(&self.client, kind, &messages);
         let decoded = self
             .ask(&body, deadline, |a| {
                 a.decode::<schema::Phrase>().map(|p| p.text)
@@ -942,9 +946,47 @@ fn merge(base: &mut serde_json::Value, extra: serde_json::Value) {
     }
 }
 
+/// The request for an eHMI text or reply: the base model's when the server's adapter is the
+/// fine-tuned advisor (`LlmConfig::phrase_with_base_model`).
+fn phrase_body(
+    client: &LlmClient,
+    kind: &str,
+    messages: &[prompt::ChatMessage],
+) -> serde_json::Value {
+    let body = client.body(
+        messages,
+        kind,
+        &schema::phrase_schema(),
+        schema::PHRASE_MAX_TOKENS,
+    );
+    let cfg = client.config();
+    if cfg.fine_tuned && cfg.phrase_with_base_model {
+        LlmClient::with_adapter_scale(body, 0.0)
+    } else {
+        body
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::LlmConfig;
+
+    #[test]
+    fn phrasings_ask_for_the_base_model_only_beside_the_fine_tuned_adapter() {
+        let messages = prompt::phrase_messages("turns left", "polite");
+        let body = |fine_tuned, phrase_with_base_model| {
+            let cfg = LlmConfig {
+                fine_tuned,
+                phrase_with_base_model,
+                ..LlmConfig::default()
+            };
+            phrase_body(&LlmClient::new(&cfg).unwrap(), "ehmi", &messages)
+        };
+        assert_eq!(body(true, true)["lora"], json!([{"id": 0, "scale": 0.0}]));
+        assert!(body(true, false).get("lora").is_none());
+        assert!(body(false, true).get("lora").is_none());
+    }
 
     #[test]
     fn a_request_is_settled_only_when_its_favourite_leads_by_the_margin() {

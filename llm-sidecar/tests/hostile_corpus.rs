@@ -26,12 +26,14 @@
 
 #[path = "../../tests/support/fault_llm.rs"]
 mod fault_llm;
+#[path = "../../tests/support/in_process_sidecar.rs"]
+mod in_process_sidecar;
 #[path = "../../tests/support/local_llm.rs"]
 mod local_llm;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::atomic::AtomicU64;
-use std::sync::{mpsc as std_mpsc, Arc, Mutex};
+use std::sync::mpsc as std_mpsc;
 use std::time::{Duration, Instant};
 
 use concord_core::scene::{AgentState, IntentAction, Scene, Style, Task, Vec2};
@@ -45,9 +47,6 @@ use concord_map::{paper, BuiltIn};
 use concord_sidecar::bus::Outbound;
 use concord_sidecar::config::{PromptFormat, SidecarConfig};
 use concord_sidecar::ehmi::{self, Executed, Turn};
-use concord_sidecar::interaction_log::InteractionLog;
-use concord_sidecar::ledger::Ledger;
-use concord_sidecar::llm::LlmClient;
 use concord_sidecar::prompt::{self, Stated};
 use concord_sidecar::service::{Counters, Sidecar};
 use concord_sidecar::untrusted::{fold, normalise, words, COMMON_WORDS};
@@ -369,18 +368,7 @@ fn run_one(
         RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
     ));
     let log_path = cfg.log.path.clone();
-    let client = LlmClient::new(&cfg.llm).unwrap();
-    let log = InteractionLog::open(&cfg.log.path, cfg.log.max_bytes, cfg.log.keep).unwrap();
-    let (out_tx, out_rx) = std_mpsc::channel();
-    let sidecar = Sidecar::new(
-        cfg,
-        client,
-        log,
-        Ledger::in_memory(8),
-        out_tx,
-        Arc::new(Mutex::new(Default::default())),
-        Arc::new(AtomicU64::new(0)),
-    );
+    let (sidecar, out_rx) = in_process_sidecar::start(cfg);
     let (req_tx, req_rx) = tokio::sync::watch::channel(None);
     let (dec_tx, dec_rx) = tokio::sync::watch::channel(None);
     let (txt_tx, txt_rx) = tokio::sync::mpsc::channel(4);
