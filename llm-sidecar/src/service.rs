@@ -5,9 +5,10 @@
 //!   is asked as soon as it is answered. With `advice.cancel_superseded`, a newer one that
 //!   describes a different situation (another logit favourite, another set of risky conflicts,
 //!   another passenger intent) cancels the call instead, unless the one in flight itself
-//!   replaced a cancelled request (so a slow server still answers every other request). A request is not sent at all when the corrected P_n is settled
-//!   (its favourite leads by `advice.settled_margin`) and the situation is the one last asked
-//!   about: the answer could not matter (counted as settled).
+//!   replaced a cancelled request (so a slow server still answers every other request). A
+//!   request is not sent at all when the corrected P_n is settled (its favourite leads by
+//!   `advice.settled_margin`) and the situation is the one last asked about: the answer could
+//!   not matter (counted as settled).
 //!   Every answer, or failure with its reason, is published with the request id and the
 //!   intents known so far, which is how intents reach the core.
 //! * **Intents.** Each message is parsed once (see [`crate::ledger`]) by the quarantined intent
