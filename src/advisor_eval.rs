@@ -22,7 +22,7 @@ use crate::llm_experiments::LlmAdvisor;
 use concord_core::Maneuver;
 use concord_sidecar::llm::LlmClient;
 use concord_sidecar::schema::{
-    action_name, advice_schema, intent_schema, style_name, task_name, AdviceAnswer, IntentAnswer,
+    action_name, intent_schema, style_name, task_name, AdviceAnswer, IntentAnswer,
     INTENT_MAX_TOKENS,
 };
 
@@ -194,12 +194,9 @@ pub fn run(url: &str, scenes: usize, messages: usize, out: &Path) -> Result<(), 
         for (i, s) in set.iter().enumerate() {
             eprint!("\r{name}: advice {}/{}   ", i + 1, set.len());
             let messages = learn::advice_prompt(&cfg, s);
-            let body = client.body(
-                &messages,
-                "advice",
-                &advice_schema(0),
-                cfg.advice.max_tokens,
-            );
+            // The fine-tuned adapter is asked in its deployed form, the answer begun for it.
+            cfg.advice.prefill_answer = tuned;
+            let body = client.advice_body(&messages, &cfg.advice);
             let (reply, ms) = ask(body, scale);
             match reply
                 .map_err(|e| e.to_string())

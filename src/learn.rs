@@ -24,7 +24,7 @@ use concord_core::{Maneuver, Params};
 use concord_ipc::wire::{AdviceRequest, SceneFrame};
 use concord_sidecar::config::{PromptFormat, SidecarConfig};
 use concord_sidecar::prompt::{self, ChatMessage, Stated};
-use concord_sidecar::schema::{ACTION_VALUES, STYLE_VALUES, TASK_VALUES};
+use concord_sidecar::schema::{advice_answer, ACTION_VALUES, STYLE_VALUES, TASK_VALUES};
 use concord_sim::controllers::{best_maneuver, Advisor, ConcordController, Controller};
 use concord_sim::driver::{DriverStyle, HumanDriver};
 use concord_sim::experiment::stream_followers;
@@ -159,11 +159,6 @@ pub fn labelled_scenes(
     }
     eprintln!(" (seeds {first_seed}..{seed})");
     Ok(out)
-}
-
-/// The answer the advice schema asks for (no reasoning steps: the deployed form).
-pub fn advice_answer(m: Maneuver) -> String {
-    format!("{{\"maneuver\": \"{}\"}}", m.name())
 }
 
 /// The advice prompt of scene `s`, as the sidecar configured by `cfg` renders it.

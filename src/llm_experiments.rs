@@ -17,9 +17,9 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use concord_ipc::wire::{AdviceRequest, SceneFrame};
-use concord_sidecar::config::{LlmConfig, PromptFormat, SidecarConfig};
+use concord_sidecar::config::{AdviceConfig, LlmConfig, PromptFormat, SidecarConfig};
 use concord_sidecar::llm::LlmClient;
-use concord_sidecar::schema::{advice_schema, AdviceAnswer};
+use concord_sidecar::schema::AdviceAnswer;
 use concord_sim::controllers::AdviceSource;
 use concord_sim::world::World;
 
@@ -63,6 +63,9 @@ impl LlmAdvisor {
             )
         })?;
         cfg.llm.fine_tuned = rt.block_on(has_adapter(url));
+        // The shipped advisor is asked in its deployed form, the answer begun for it; any
+        // other server answers under the schema alone.
+        cfg.advice.prefill_answer = cfg.llm.fine_tuned;
         Ok(LlmAdvisor {
             client: LlmClient::new(&llm)?,
             rt,
@@ -93,9 +96,12 @@ impl LlmAdvisor {
             self.cfg.intent.weak_below,
             self.cfg.llm.fine_tuned,
         );
-        let body = self
-            .client
-            .body(&messages, "advice", &advice_schema(steps), max_tokens);
+        let advice = AdviceConfig {
+            reasoning_steps: steps,
+            max_tokens,
+            ..self.cfg.advice.clone()
+        };
+        let body = self.client.advice_body(&messages, &advice);
         let started = Instant::now();
         let reply = self
             .rt

@@ -119,6 +119,13 @@ pub struct AdviceConfig {
     /// and the cancelled answer is lost. Off: the call in flight is answered and the newest
     /// request waits for it.
     pub cancel_superseded: bool,
+    /// The answer is begun for the model (an assistant message `{"maneuver": "`, the start of
+    /// the only answer the schema allows without reasoning steps) and the rest is constrained
+    /// by a grammar in the request's `grammar` field instead of `response_format`: the model
+    /// writes the value and `"}` (4 to 5 tokens instead of 10 to 11), the same text as
+    /// before. Needs llama.cpp's server (assistant prefill and GBNF grammars); off for others.
+    /// Not used with reasoning steps.
+    pub prefill_answer: bool,
 }
 
 impl Default for AdviceConfig {
@@ -131,6 +138,7 @@ impl Default for AdviceConfig {
             max_tokens: 64,
             settled_margin: 0.6,
             cancel_superseded: false,
+            prefill_answer: true,
         }
     }
 }

@@ -7,9 +7,10 @@ use std::time::{Duration, Instant};
 use concord_ipc::wire::AdviceFailure;
 use serde_json::{json, Value};
 
-use crate::config::LlmConfig;
+use crate::config::{AdviceConfig, LlmConfig};
 use crate::prompt::ChatMessage;
 use crate::reply::{Answer, ReplyError};
+use crate::schema;
 
 /// Why a call gave no answer.
 #[derive(Debug, Clone, PartialEq)]
@@ -128,6 +129,26 @@ impl LlmClient {
         b
     }
 
+    /// The request body of an advice call (eq. 16) for `messages`: the answer constrained by
+    /// the advice schema, or with `advice.prefill_answer` (and no reasoning steps) begun as
+    /// [`schema::ADVICE_ANSWER_START`] and finished under [`schema::advice_rest_grammar`].
+    pub fn advice_body(&self, messages: &[ChatMessage], advice: &AdviceConfig) -> Value {
+        let steps = advice.reasoning_steps;
+        if !advice.prefill_answer || steps > 0 {
+            let schema = schema::advice_schema(steps);
+            return self.body(messages, "advice", &schema, advice.max_tokens);
+        }
+        let mut b = self.body(messages, "advice", &Value::Null, advice.max_tokens);
+        let o = b.as_object_mut().expect("a body is an object");
+        o.remove("response_format");
+        o.insert("grammar".into(), schema::advice_rest_grammar().into());
+        o["messages"]
+            .as_array_mut()
+            .expect("messages are an array")
+            .push(json!({"role": "assistant", "content": schema::ADVICE_ANSWER_START}));
+        b
+    }
+
     /// `body` asking llama.cpp's server to run its first LoRA adapter at `scale` (its per-request
     /// `lora` field): 0 is the base model, 1 the adapter as loaded. Other servers reject or
     /// ignore the field.
@@ -170,6 +191,8 @@ impl LlmClient {
         }
     }
 
+    /// One attempt. A body whose last message is the assistant's holds the answer's start
+    /// (prefill): the answer is read as that start and the continuation.
     async fn attempt(&self, body: &Value) -> Result<Answer, LlmError> {
         let mut req = self.http.post(&self.url).json(body);
         if let Some(key) = &self.api_key {
@@ -182,7 +205,12 @@ impl LlmClient {
             let text = String::from_utf8_lossy(&bytes[..bytes.len().min(400)]).into_owned();
             return Err(LlmError::HttpStatus(status.as_u16(), text));
         }
-        Answer::parse(&bytes).map_err(LlmError::Reply)
+        let messages = body["messages"].as_array();
+        let prefill = match messages.and_then(|m| m.last()) {
+            Some(m) if m["role"] == "assistant" => m["content"].as_str().unwrap_or(""),
+            _ => "",
+        };
+        Answer::parse_prefilled(&bytes, prefill).map_err(LlmError::Reply)
     }
 }
 
@@ -191,5 +219,38 @@ fn classify(e: reqwest::Error) -> LlmError {
         LlmError::Timeout
     } else {
         LlmError::Connection(e.to_string())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use concord_core::Maneuver;
+
+    #[test]
+    fn a_prefilled_advice_body_begins_the_answer_and_the_grammar_finishes_it() {
+        let client = LlmClient::new(&LlmConfig::default()).unwrap();
+        let messages = [ChatMessage::system("Concord advice.")];
+        let mut advice = AdviceConfig::default();
+        let b = client.advice_body(&messages, &advice);
+        let last = b["messages"].as_array().unwrap().last().unwrap();
+        assert_eq!(last["role"], "assistant");
+        assert_eq!(last["content"], schema::ADVICE_ANSWER_START);
+        assert!(b.get("response_format").is_none());
+        let grammar = b["grammar"].as_str().unwrap();
+        for m in Maneuver::ALL {
+            assert!(grammar.contains(&format!("\"{}\"", m.name())), "{grammar}");
+            assert!(schema::advice_answer(m).starts_with(schema::ADVICE_ANSWER_START));
+        }
+        // Reasoning steps, or the option off: the schema alone.
+        advice.reasoning_steps = 2;
+        let with_steps = client.advice_body(&messages, &advice);
+        advice.reasoning_steps = 0;
+        advice.prefill_answer = false;
+        for b in [with_steps, client.advice_body(&messages, &advice)] {
+            assert!(b.get("grammar").is_none());
+            assert_eq!(b["response_format"]["json_schema"]["name"], "advice");
+            assert_eq!(b["messages"].as_array().unwrap().len(), 1);
+        }
     }
 }

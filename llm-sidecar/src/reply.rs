@@ -130,6 +130,13 @@ pub struct Answer {
 impl Answer {
     /// Parses a completion body. The answer must be a JSON object.
     pub fn parse(body: &[u8]) -> Result<Answer, ReplyError> {
+        Self::parse_prefilled(body, "")
+    }
+
+    /// Parses a completion body of a request that began the answer with `prefill` (an
+    /// assistant message): the answer is `prefill` and the continuation, whether the server's
+    /// content repeats `prefill` (llama.cpp's does) or not; the tokens spell the continuation.
+    pub fn parse_prefilled(body: &[u8], prefill: &str) -> Result<Answer, ReplyError> {
         let c: Completion = serde_json::from_slice(body)
             .map_err(|e| ReplyError::Malformed(format!("not a chat completion: {e}")))?;
         let choice = c
@@ -137,10 +144,13 @@ impl Answer {
             .into_iter()
             .next()
             .ok_or_else(|| ReplyError::Malformed("no choices".into()))?;
-        let content = choice
+        let mut content = choice
             .message
             .content
             .ok_or_else(|| ReplyError::Malformed("no message content".into()))?;
+        if !content.starts_with(prefill) {
+            content.insert_str(0, prefill);
+        }
         match choice.finish_reason.as_deref() {
             None | Some("stop") => {}
             Some(other) => {
@@ -159,7 +169,7 @@ impl Answer {
         let tokens = choice
             .logprobs
             .and_then(|l| l.content)
-            .map(|t| spans(&t, &content))
+            .map(|t| spans(&t, &content, prefill.as_bytes()))
             .unwrap_or_default();
         Ok(Answer {
             content,
@@ -259,8 +269,9 @@ fn log_allowed_mass(t: &Token, lead: usize, done: &[u8], allowed: &[&str]) -> f6
     mass.ln()
 }
 
-/// The tokens placed on `content`, which must occur in their concatenation; empty otherwise.
-fn spans(tokens: &[TokenLogprob], content: &str) -> Vec<Token> {
+/// The tokens placed on `content`, which must occur in `prefill` followed by their
+/// concatenation; empty otherwise.
+fn spans(tokens: &[TokenLogprob], content: &str, prefill: &[u8]) -> Vec<Token> {
     if tokens.iter().any(|t| t.logprob.is_nan() || t.logprob > 0.0) {
         return Vec::new();
     }
@@ -269,7 +280,11 @@ fn spans(tokens: &[TokenLogprob], content: &str) -> Vec<Token> {
             .clone()
             .unwrap_or_else(|| t.token.as_bytes().to_vec())
     };
-    let text: Vec<u8> = tokens.iter().flat_map(bytes_of).collect();
+    let text: Vec<u8> = prefill
+        .iter()
+        .copied()
+        .chain(tokens.iter().flat_map(bytes_of))
+        .collect();
     let c = content.as_bytes();
     if c.is_empty() || text.len() < c.len() {
         return Vec::new();
@@ -277,7 +292,7 @@ fn spans(tokens: &[TokenLogprob], content: &str) -> Vec<Token> {
     let Some(offset) = text.windows(c.len()).position(|w| w == c) else {
         return Vec::new();
     };
-    let mut at = -(offset as isize);
+    let mut at = prefill.len() as isize - offset as isize;
     tokens
         .iter()
         .map(|t| {
@@ -477,6 +492,19 @@ mod tests {
         let a = Answer::parse(&body(r#"{"maneuver": "decelerate"}"#, &tokens)).unwrap();
         let c = a.confidence("maneuver", &NAMES).unwrap();
         assert!((c - (-0.51f64).exp()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_prefilled_answer_is_read_whether_or_not_the_content_repeats_the_start() {
+        let start = "{\"maneuver\": \"";
+        let tokens = [("turn", -0.2), ("_", 0.0), ("left", -0.1), ("\"}", 0.0)];
+        // llama.cpp's content repeats the prefill; another server's may be the rest only.
+        for content in [r#"{"maneuver": "turn_left"}"#, r#"turn_left"}"#] {
+            let a = Answer::parse_prefilled(&body(content, &tokens), start).unwrap();
+            assert_eq!(a.content, r#"{"maneuver": "turn_left"}"#);
+            let c = a.confidence("maneuver", &NAMES).unwrap();
+            assert!((c - (-0.3f64).exp()).abs() < 1e-12, "{content}: {c}");
+        }
     }
 
     #[test]

@@ -22,6 +22,25 @@ pub fn maneuver_names() -> Vec<&'static str> {
     Maneuver::ALL.iter().map(|m| m.name()).collect()
 }
 
+/// How every advice answer without reasoning steps begins (`{"maneuver": "turn_left"}`), as the
+/// fine-tuned adapter was trained to write it.
+pub const ADVICE_ANSWER_START: &str = "{\"maneuver\": \"";
+
+/// The advice answer without reasoning steps for `m`.
+pub fn advice_answer(m: Maneuver) -> String {
+    format!("{ADVICE_ANSWER_START}{}\"}}", m.name())
+}
+
+/// GBNF grammar of the rest of an advice answer begun with [`ADVICE_ANSWER_START`]: one
+/// maneuver name and the closing `"}`.
+pub fn advice_rest_grammar() -> String {
+    let names: Vec<String> = maneuver_names()
+        .iter()
+        .map(|n| format!("\"{n}\""))
+        .collect();
+    format!("root ::= ({}) \"\\\"}}\"", names.join(" | "))
+}
+
 /// Schema of the advice answer: A_final (its tokens carry the confidence), then up to `steps`
 /// short reasoning steps (0: none, the fastest). The eHMI text is asked for separately, for the
 /// decision the core executes.

@@ -362,12 +362,7 @@ impl Sidecar {
                 self.cfg.llm.fine_tuned,
             )
         };
-        let body = self.client.body(
-            &messages,
-            "advice",
-            &schema::advice_schema(self.cfg.advice.reasoning_steps),
-            self.cfg.advice.max_tokens,
-        );
+        let body = self.client.advice_body(&messages, &self.cfg.advice);
         let decoded = self
             .ask(&body, Deadline::At(deadline), AdviceAnswer::decode)
             .await;

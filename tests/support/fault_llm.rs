@@ -179,6 +179,8 @@ fn serve(stream: TcpStream, shared: &Shared) {
         let intent = text.contains("\"name\":\"intent\"");
         let phrase = text.contains("\"name\":\"ehmi\"") || text.contains("\"name\":\"reply\"");
         let current = mode.lock().unwrap().clone();
+        let request: serde_json::Value = serde_json::from_slice(&body).unwrap_or_default();
+        let start = prefill(&request);
         let answer = |maneuver: &str, p: f64, ehmi: &str, action: &str| {
             if intent {
                 completion(&[
@@ -193,7 +195,7 @@ fn serve(stream: TcpStream, shared: &Shared) {
             } else if phrase {
                 completion(&[(r#"{"text":""#, 0.0), (ehmi, -0.2), ("\"}", 0.0)])
             } else {
-                completion(&[(r#"{"maneuver":""#, 0.0), (maneuver, p.ln()), ("\"}", 0.0)])
+                advice(start, &[(maneuver, p.ln()), ("\"}", 0.0)])
             }
         };
         match current {
@@ -227,10 +229,9 @@ fn serve(stream: TcpStream, shared: &Shared) {
             Mode::UnknownEnum => respond(
                 &mut out,
                 200,
-                &completion(&[(r#"{"maneuver":"fly","ehmi":"Up we go.","style":"x"}"#, 0.0)]),
+                &advice(start, &[(r#"fly","ehmi":"Up we go.","style":"x"}"#, 0.0)]),
             ),
             Mode::Obey => {
-                let request: serde_json::Value = serde_json::from_slice(&body).unwrap_or_default();
                 let reply = obey(&request, &mut shared.memory.lock().unwrap());
                 shared.bodies.lock().unwrap().push(request);
                 respond(&mut out, 200, &reply);
@@ -261,7 +262,7 @@ pub fn obey(request: &serde_json::Value, memory: &mut Vec<String>) -> String {
         .unwrap_or("");
     let user = request["messages"]
         .as_array()
-        .and_then(|m| m.last())
+        .and_then(|m| m.iter().rev().find(|m| m["role"] == "user"))
         .and_then(|m| m["content"].as_str())
         .unwrap_or("")
         .to_string();
@@ -326,7 +327,7 @@ pub fn obey(request: &serde_json::Value, memory: &mut Vec<String>) -> String {
             let quoted = serde_json::to_string(&text).unwrap();
             completion(&[(r#"{"text":"#, 0.0), (&quoted, 0.0), ("}", 0.0)])
         }
-        _ => completion(&[(r#"{"maneuver":""#, 0.0), (demanded, 0.0), ("\"}", 0.0)]),
+        _ => advice(prefill(request), &[(demanded, 0.0), ("\"}", 0.0)]),
     }
 }
 
@@ -401,8 +402,35 @@ fn base64(word: &str) -> Option<String> {
     String::from_utf8(out).ok()
 }
 
+/// The answer's start the request gave as its last (assistant) message, as llama.cpp's server
+/// reads it.
+fn prefill(request: &serde_json::Value) -> Option<&str> {
+    let last = request["messages"].as_array()?.last()?;
+    (last["role"] == "assistant").then(|| last["content"].as_str())?
+}
+
+/// An advice answer whose maneuver value begins with `rest`: after the request's prefill, as
+/// llama.cpp's server answers one (the content repeats the prefill, the tokens do not).
+fn advice(prefill: Option<&str>, rest: &[(&str, f64)]) -> String {
+    match prefill {
+        Some(p) => completion_after(p, rest),
+        None => {
+            let mut tokens = vec![(r#"{"maneuver":""#, 0.0)];
+            tokens.extend_from_slice(rest);
+            completion(&tokens)
+        }
+    }
+}
+
 fn completion(tokens: &[(&str, f64)]) -> String {
-    let content: String = tokens.iter().map(|(t, _)| *t).collect();
+    completion_after("", tokens)
+}
+
+/// A completion of `tokens` after `prefill`.
+fn completion_after(prefill: &str, tokens: &[(&str, f64)]) -> String {
+    let content: String = std::iter::once(prefill)
+        .chain(tokens.iter().map(|(t, _)| *t))
+        .collect();
     let lp: Vec<_> = tokens
         .iter()
         .map(|(t, l)| serde_json::json!({"token": t, "logprob": l, "bytes": t.as_bytes(), "top_logprobs": []}))

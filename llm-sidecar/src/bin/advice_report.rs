@@ -189,12 +189,7 @@ impl Report {
 
     /// One advice call, without the core's deadline (so that slow answers are measured too).
     async fn advise(&self, messages: &[ChatMessage]) -> Result<Reply, LlmError> {
-        let body = self.client.body(
-            messages,
-            "advice",
-            &schema::advice_schema(self.cfg.advice.reasoning_steps),
-            self.cfg.advice.max_tokens,
-        );
+        let body = self.client.advice_body(messages, &self.cfg.advice);
         self.client.call(&body, self.deadline()).await
     }
 
